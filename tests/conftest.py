@@ -1,0 +1,54 @@
+"""Shared fixtures: the bundled Lensfun database and small hand-made XML files."""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from lensaudit.database import bundled_database_path
+
+
+@pytest.fixture(scope="session")
+def bundled_db() -> Path:
+    """The Lensfun database installed with lensfunpy (the default of `lensaudit scan`)."""
+    return bundled_database_path()
+
+
+def lens_xml(*distortions: str, cropfactor: str | None = "1", extra: str = "",
+             calibration: str = "") -> str:
+    """A one-lens database whose calibration holds the given <distortion> lines."""
+    crop = f"<cropfactor>{cropfactor}</cropfactor>" if cropfactor is not None else ""
+    body = "\n            ".join(distortions)
+    return textwrap.dedent(f"""\
+        <lensdatabase version="2">
+            <lens>
+                <maker>Test</maker>
+                <model>Test 10mm</model>
+                <model lang="de">Testobjektiv 10mm</model>
+                <mount>Test Mount</mount>
+                {crop}
+                {extra}
+                <calibration{calibration}>
+                    {body}
+                </calibration>
+            </lens>
+        </lensdatabase>
+        """)
+
+
+@pytest.fixture
+def write_xml(tmp_path: Path) -> Callable[..., Path]:
+    """Write XML text (or bytes) to a file in a temporary database directory."""
+
+    def write(content: str | bytes, name: str = "test.xml") -> Path:
+        path = tmp_path / "db" / name
+        path.parent.mkdir(exist_ok=True)
+        if isinstance(content, str):
+            content = content.encode("utf-8")
+        path.write_bytes(content)
+        return path
+
+    return write
