@@ -1,0 +1,55 @@
+"""lensaudit: find where polynomial lens-distortion models fold back.
+
+A radial distortion D(r) = r F(r) is invertible only up to its first local
+maximum, r_max. lensaudit computes r_max for every model of a Lensfun
+database and compares it with the image corner.
+
+>>> import lensaudit
+>>> frame = lensaudit.audit()            # the database bundled with lensfunpy
+>>> frame[frame.folds_in_image]          # entries that fold inside the image
+
+The submodules follow the pipeline: :mod:`~lensaudit.loader` (XML to
+entries), :mod:`~lensaudit.normalizer` (models to cubic form),
+:mod:`~lensaudit.solver` (r_max), :mod:`~lensaudit.metrics` and
+:mod:`~lensaudit.summary`, then :mod:`~lensaudit.formats`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+if TYPE_CHECKING:
+    import pandas
+
+__all__ = ["__version__", "audit", "min_positive_root", "run"]
+
+
+def audit(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None
+          ) -> pandas.DataFrame:
+    """Audit a Lensfun database and return one row per distortion entry.
+
+    ``path`` is a database directory, an XML file, a list of those, or None
+    for the database bundled with lensfunpy. Columns are
+    :data:`lensaudit.pipeline.COLUMNS`; r_max and d_max are in Hugin units
+    (1 = half the short side of the calibration image).
+    """
+    from .pipeline import run
+
+    return run(path).to_dataframe()
+
+
+def __getattr__(name: str) -> Any:
+    # Lazy, so that `import lensaudit` and `lensaudit --help` stay fast.
+    if name == "run":
+        from .pipeline import run
+
+        return run
+    if name == "min_positive_root":
+        from .solver import min_positive_root
+
+        return min_positive_root
+    raise AttributeError(f"module 'lensaudit' has no attribute {name!r}")

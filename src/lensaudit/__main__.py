@@ -1,0 +1,3 @@
+from lensaudit.cli import main
+
+main()

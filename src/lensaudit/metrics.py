@@ -1,0 +1,122 @@
+"""Per-entry fold-back metrics: r_max, d_max, tail, r_corner, r_normalized.
+
+Units. Lensfun's ptlens, poly3 and poly5 models work in "Hugin units": r = 1
+is half the SHORT side of the calibration image, for every focal length. The
+undistorted r_max and the distorted d_max = D(r_max) are in those units, and
+the corner of the calibration image is at r_corner = hypot(aspect, 1).
+
+The paper compares d_max with hypot(18, 12) / (crop * focal), a radius in
+focal-length units. That mixes units; it is kept, labelled ``*_paper``, only
+to reproduce the paper's Figure 5.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import normalizer
+from .solver import min_positive_root
+
+FloatArray = NDArray[np.float64]
+
+#: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
+HALF_DIAGONAL_MM = float(np.hypot(18.0, 12.0))
+
+TAIL_POSITIVE = "positive"
+TAIL_NEGATIVE = "negative"
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Metric columns, one element per entry (NaN where not computed).
+
+    ``tail`` is +1 (D -> +inf), -1 (D -> -inf) or 0 (r_max infinite or not
+    computed). ``folds_in_image`` is False where r_max is infinite.
+    """
+
+    r_max: FloatArray
+    d_max: FloatArray
+    tail: NDArray[np.int8]
+    r_corner: FloatArray
+    r_normalized: FloatArray
+    r_corner_paper: FloatArray
+    r_normalized_paper: FloatArray
+    folds_in_image: NDArray[np.bool_]
+
+
+def cubic_r_max(cubic: normalizer.Cubic) -> FloatArray:
+    """r_max of a normalized model: where D' first changes sign from + to -.
+
+    0 where D'(0) <= 0 (the model decreases from the centre), ``inf`` where D
+    is increasing on (0, inf), NaN for NaN coefficients.
+    """
+    w = min_positive_root(cubic.a, cubic.b, cubic.c)
+    w = np.asarray(w, dtype=np.float64)
+    r_max = np.sqrt(w) if cubic.power == 2 else w
+    slope = np.broadcast_to(cubic.slope_at_centre, r_max.shape)
+    return np.where(slope > 0, r_max, np.where(np.isnan(slope), np.nan, 0.0))
+
+
+def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArray[np.int8]]:
+    """(r_max, d_max, tail sign) for a normalized model."""
+    r_max = cubic_r_max(cubic)
+    finite = np.isfinite(r_max)
+    d_max = np.where(finite, normalizer.evaluate(cubic.distortion, np.where(finite, r_max, 0)),
+                     r_max)
+    tail = np.where(finite, normalizer.leading_sign(cubic.distortion), 0).astype(np.int8)
+    return r_max, d_max, tail
+
+
+def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
+    """Corner radius of the calibration image in Hugin units: hypot(aspect, 1).
+
+    Aspect ratios below 1 (portrait) are taken as their inverse, since r = 1
+    is half the short side either way.
+    """
+    aspect = np.asarray(aspect_ratio, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return np.hypot(np.maximum(aspect, 1.0 / aspect), 1.0)
+
+
+def paper_image_corner(crop_factor: ArrayLike, focal: ArrayLike) -> FloatArray:
+    """The paper's Eq. 29: hypot(18, 12) / (crop * focal), in focal-length units."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return HALF_DIAGONAL_MM / (np.asarray(crop_factor, np.float64) * np.asarray(focal))
+
+
+def compute(model: NDArray[np.str_] | list[str], a: ArrayLike, b: ArrayLike, c: ArrayLike,
+            k1: ArrayLike, k2: ArrayLike, crop_factor: ArrayLike, aspect_ratio: ArrayLike,
+            focal: ArrayLike, audited: ArrayLike) -> Metrics:
+    """Metrics for entries given as columns; only ``audited`` entries are computed.
+
+    ``model`` is "ptlens", "poly3" or "poly5" per entry; coefficients a, b, c
+    (ptlens), k1 (poly3, poly5) and k2 (poly5) are raw Lensfun values.
+    """
+    model = np.asarray(model)
+    audited = np.asarray(audited, dtype=bool)
+    size = model.shape[0]
+    r_max = np.full(size, np.nan)
+    d_max = np.full(size, np.nan)
+    tail = np.zeros(size, dtype=np.int8)
+    columns = {name: np.asarray(values, dtype=np.float64)
+               for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()}
+    builders = {
+        "ptlens": lambda rows: normalizer.ptlens(*(columns[n][rows] for n in "abc")),
+        "poly3": lambda rows: normalizer.poly3(columns["k1"][rows]),
+        "poly5": lambda rows: normalizer.poly5(columns["k1"][rows], columns["k2"][rows]),
+    }
+    for name, build in builders.items():
+        rows = np.flatnonzero(audited & (model == name))
+        if rows.size:
+            r_max[rows], d_max[rows], tail[rows] = model_r_max(build(rows))
+    r_corner = np.where(audited, image_corner(aspect_ratio), np.nan)
+    r_corner_paper = np.where(audited, paper_image_corner(crop_factor, focal), np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r_normalized = d_max / r_corner
+        r_normalized_paper = d_max / r_corner_paper
+    folds = audited & np.isfinite(r_max) & (r_normalized < 1)
+    return Metrics(r_max, d_max, tail, r_corner, r_normalized, r_corner_paper,
+                   r_normalized_paper, folds)

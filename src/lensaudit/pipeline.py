@@ -1,0 +1,145 @@
+"""The audit pipeline: database -> entries -> cubic form -> roots -> metrics.
+
+:func:`run` gives an :class:`Audit`, plain columns that the output formats
+and :func:`lensaudit.audit` (a pandas DataFrame) are made from.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from . import database, loader, metrics
+from .loader import STATUS_OK, DistortionEntry, SourceFile
+
+if TYPE_CHECKING:
+    import pandas
+
+    from .summary import Summary
+
+#: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
+COLUMNS = (
+    "file", "line", "maker", "lens", "type", "crop_factor", "aspect_ratio", "model",
+    "focal", "real_focal", "a", "b", "c", "k1", "k2", "r_max", "d_max", "tail",
+    "r_corner", "r_normalized", "r_corner_paper", "r_normalized_paper",
+    "folds_in_image", "status", "message",
+)
+
+ENTRY_COLUMNS = ("file", "line", "maker", "lens", "type", "crop_factor", "aspect_ratio",
+                 "model", "focal", "real_focal", "a", "b", "c", "k1", "k2", "status",
+                 "message")
+FLOAT_COLUMNS = frozenset({
+    "crop_factor", "aspect_ratio", "focal", "real_focal", "a", "b", "c", "k1", "k2",
+    "r_max", "d_max", "r_corner", "r_normalized", "r_corner_paper", "r_normalized_paper",
+})
+
+_TAIL_NAMES = {1: metrics.TAIL_POSITIVE, -1: metrics.TAIL_NEGATIVE, 0: ""}
+
+
+@dataclass(frozen=True)
+class Audit:
+    """The audit of one database: its source, files, entries and metrics."""
+
+    source: database.DatabaseSource
+    files: list[SourceFile]
+    entries: list[DistortionEntry]
+    metrics: metrics.Metrics
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    @cached_property
+    def audited(self) -> np.ndarray:
+        """Boolean mask of entries with status ``ok``."""
+        return np.fromiter((e.status == STATUS_OK for e in self.entries), bool,
+                           len(self.entries))
+
+    def column(self, name: str) -> list[Any]:
+        """One output column as a Python list (floats NaN where empty).
+
+        ``tail`` is "positive", "negative" or ""; ``folds_in_image`` is a bool,
+        or None for entries that were not audited.
+        """
+        if name in ENTRY_COLUMNS:
+            return [getattr(entry, name) for entry in self.entries]
+        if name == "tail":
+            return [_TAIL_NAMES[t] for t in self.metrics.tail.tolist()]
+        if name == "folds_in_image":
+            return [bool(f) if ok else None
+                    for f, ok in zip(self.metrics.folds_in_image.tolist(),
+                                     self.audited.tolist(), strict=True)]
+        return getattr(self.metrics, name).tolist()
+
+    def columns(self) -> dict[str, list[Any]]:
+        """All output columns, in :data:`COLUMNS` order."""
+        return {name: self.column(name) for name in COLUMNS}
+
+    def records(self) -> list[dict[str, Any]]:
+        """One dict per entry, keys in :data:`COLUMNS` order."""
+        columns = self.columns()
+        return [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(),
+                                                                     strict=True)]
+
+    @cached_property
+    def summary(self) -> Summary:
+        from .summary import summarize
+
+        return summarize(self)
+
+    def to_dataframe(self) -> pandas.DataFrame:
+        """The entries as a pandas DataFrame with :data:`COLUMNS`."""
+        import pandas
+
+        frame = pandas.DataFrame(self.columns(), columns=list(COLUMNS))
+        frame["line"] = frame["line"].astype("int64")
+        frame["folds_in_image"] = frame["folds_in_image"].astype("boolean")
+        return frame
+
+
+def run(paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None
+        ) -> Audit:
+    """Audit a Lensfun database: directories and/or XML files, or the bundled one.
+
+    Raises :class:`lensaudit.loader.LoadError` when the paths cannot be read
+    at all; problems inside files become entries with a status instead.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    source = database.resolve(list(paths) if paths else None)
+    loaded = loader.load(source.paths)
+    return audit_entries(loaded.entries, source, loaded.files)
+
+
+def audit_entries(entries: list[DistortionEntry],
+                  source: database.DatabaseSource | None = None,
+                  files: list[SourceFile] | None = None) -> Audit:
+    """Compute the metrics of already loaded entries."""
+    size = len(entries)
+
+    def floats(name: str) -> np.ndarray:
+        return np.fromiter((getattr(e, name) for e in entries), np.float64, size)
+
+    audited = np.fromiter((e.status == STATUS_OK for e in entries), bool, size)
+    result = metrics.compute(
+        [e.model for e in entries], floats("a"), floats("b"), floats("c"), floats("k1"),
+        floats("k2"), floats("crop_factor"), floats("aspect_ratio"), floats("focal"),
+        audited,
+    )
+    if source is None:
+        source = database.DatabaseSource((), "entries given in memory")
+    return Audit(source, files or [], entries, result)
+
+
+def format_float(value: float) -> str:
+    """A float as the text formats write it: shortest round-trip, inf, or empty for NaN."""
+    if value != value:
+        return ""
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return repr(value)

@@ -1,0 +1,86 @@
+"""Per-entry metrics on models whose r_max has a closed form."""
+
+from __future__ import annotations
+
+import math
+
+import mpmath
+import numpy as np
+import pytest
+
+from lensaudit import metrics, normalizer
+
+
+def compute(model, a=np.nan, b=np.nan, c=np.nan, k1=np.nan, k2=np.nan, crop=1.0, aspect=1.5,
+            focal=20.0):
+    return metrics.compute([model], [a], [b], [c], [k1], [k2], [crop], [aspect], [focal], [True])
+
+
+@pytest.mark.parametrize("k1", [-0.01, -0.1, -0.3, -1.0])
+def test_poly3_with_negative_k1_folds_at_the_closed_form_radius(k1):
+    # D'(r) = (1 - k1) + 3 k1 r^2 = 0  =>  r_max^2 = (1 - k1) / (-3 k1)
+    mpmath.mp.dps = 40
+    k = mpmath.mpf(k1)
+    r_max = mpmath.sqrt((1 - k) / (-3 * k))
+    d_max = r_max * (1 - k + k * r_max**2)
+    result = compute("poly3", k1=k1)
+    assert float(result.r_max[0]) == pytest.approx(float(r_max), rel=1e-14)
+    assert float(result.d_max[0]) == pytest.approx(float(d_max), rel=1e-14)
+    assert result.tail[0] == -1
+
+
+@pytest.mark.parametrize("k1", [0.0, 0.01, 0.5])
+def test_poly3_with_non_negative_k1_below_one_never_folds(k1):
+    result = compute("poly3", k1=k1)
+    assert math.isinf(result.r_max[0]) and math.isinf(result.d_max[0])
+    assert result.tail[0] == 0 and not result.folds_in_image[0]
+
+
+def test_model_decreasing_at_the_centre_has_no_valid_domain():
+    result = compute("poly3", k1=1.5)  # D'(0) = 1 - k1 < 0
+    assert result.r_max[0] == 0 and result.folds_in_image[0]
+
+
+def test_ptlens_that_dips_and_recovers_has_a_positive_tail():
+    # a = 1/11, b = 0, c = -14/11 give D'(r) = (4/11)(r - 1)(r - 2)(r + 3):
+    # D rises to r = 1, falls to r = 2, then rises for ever. D(1) = 1 for any ptlens.
+    result = compute("ptlens", a=1 / 11, b=0.0, c=-14 / 11)
+    assert result.r_max[0] == pytest.approx(1.0, rel=1e-14)
+    assert result.d_max[0] == pytest.approx(1.0, rel=1e-14)
+    assert result.tail[0] == 1
+
+
+def test_ptlens_with_negative_leading_coefficient_has_a_negative_tail():
+    result = compute("ptlens", a=-0.024, b=-0.002, c=0.005)
+    assert np.isfinite(result.r_max[0]) and result.tail[0] == -1
+
+
+def test_image_corner_is_in_hugin_units_independent_of_focal():
+    assert float(metrics.image_corner(1.5)) == pytest.approx(math.sqrt(13) / 2, rel=1e-15)
+    assert float(metrics.image_corner(4 / 3)) == pytest.approx(5 / 3, rel=1e-15)
+    assert float(metrics.image_corner(2 / 3)) == float(metrics.image_corner(1.5))
+    a = compute("poly3", k1=-0.1, focal=10)
+    b = compute("poly3", k1=-0.1, focal=100)
+    assert a.r_normalized[0] == b.r_normalized[0]
+
+
+def test_paper_corner_is_the_papers_equation_29():
+    result = compute("poly3", k1=-0.1, crop=1.5, focal=20)
+    assert result.r_corner_paper[0] == pytest.approx(math.hypot(18, 12) / 30, rel=1e-15)
+    assert result.r_normalized_paper[0] == pytest.approx(
+        result.d_max[0] / (math.hypot(18, 12) / 30), rel=1e-15)
+
+
+def test_folds_in_image_means_d_max_below_the_corner():
+    mild = compute("poly3", k1=-0.05)   # fold far outside the corner
+    strong = compute("poly3", k1=-0.3)  # fold inside
+    assert mild.r_normalized[0] > 1 and not mild.folds_in_image[0]
+    assert strong.r_normalized[0] < 1 and strong.folds_in_image[0]
+
+
+def test_entries_not_audited_get_no_metrics():
+    result = metrics.compute(["poly3", "acm"], [np.nan] * 2, [np.nan] * 2, [np.nan] * 2,
+                             [-0.1, 0.2], [np.nan] * 2, [1, 1], [1.5, 1.5], [10, 10],
+                             [True, False])
+    assert np.isfinite(result.r_max[0]) and np.isnan(result.r_max[1])
+    assert not result.folds_in_image[1] and result.tail[1] == 0
