@@ -1,14 +1,51 @@
-"""The ``lensaudit`` command: one click group, one module per subcommand."""
+"""The ``lensaudit`` command: one click group, one module per subcommand.
+
+Subcommand modules are imported only when their command runs, so that
+``lensaudit scan`` does not pay for matplotlib, pandas or git plumbing.
+"""
 
 from __future__ import annotations
+
+from importlib import import_module
+from importlib.util import find_spec
 
 import click
 
 from .. import __version__
-from .scan import scan
+
+#: Subcommand name -> (module under lensaudit.cli, one-line help).
+SUBCOMMANDS = {
+    "scan": ("scan", "Compute r_max for every distortion entry of a Lensfun database."),
+    "report": ("report", "Write tables, figures and a self-contained HTML report."),
+    "plot": ("plot", "Plot one entry's D(r), its undistortion, or r_max maps."),
+    "check": ("check", "Fail when a database (or a change to it) has models that fold."),
+    "project": ("project", "Project 3D points with a model, dropping those beyond r_max."),
+    "history": ("history", "Audit every revision of a Lensfun database kept in git."),
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class LazyGroup(click.Group):
+    """A click group whose subcommands are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return [name for name, (module, _) in SUBCOMMANDS.items()
+                if find_spec(f"{__name__}.{module}") is not None]
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.list_commands(ctx):
+            return None
+        module = import_module(f"{__name__}.{SUBCOMMANDS[cmd_name][0]}")
+        return getattr(module, cmd_name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        # Listing help must not import every subcommand: use the short texts here.
+        rows = [(name, SUBCOMMANDS[name][1]) for name in self.list_commands(ctx)]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="lensaudit")
 def main() -> None:
     """Audit lens-distortion models for fold-back.
@@ -18,8 +55,5 @@ def main() -> None:
     inside the image. lensaudit computes r_max for every ptlens, poly3 and
     poly5 model of a Lensfun database and compares it with the image corner.
 
-    Exit codes: 0 done, 2 bad usage or input that could not be read.
+    Exit codes: 0 done, 1 findings (check), 2 bad usage or unreadable input.
     """
-
-
-main.add_command(scan)
