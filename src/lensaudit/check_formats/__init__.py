@@ -1,0 +1,58 @@
+"""Output formats of ``lensaudit check``: one module per format, each with
+``write(result, stream)`` taking a :class:`lensaudit.check.CheckResult`."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from importlib import import_module
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from ..check import CheckResult
+
+#: Format name -> module under lensaudit.check_formats.
+FORMATS = {"text": "text", "json": "json_format", "github": "github", "junit": "junit"}
+
+# C0 and C1 control characters, DEL, the line and paragraph separators, and
+# lone surrogates (undecodable bytes of a file name): text from a database
+# must not move a terminal's cursor, split a line or fail to encode.
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def writer(name: str) -> Callable[[CheckResult, TextIO], None]:
+    """The ``write(result, stream)`` function of the named format."""
+    return import_module(f"{__name__}.{FORMATS[name]}").write
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters shown as ``\\xNN`` escapes."""
+    return _CONTROL.sub(
+        lambda m: (
+            f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256 else f"\\u{ord(m.group()):04x}"
+        ),
+        text,
+    )
+
+
+def summary_line(result: CheckResult) -> str:
+    """One sentence: what was checked, what was found, whether the check fails."""
+    counts = result.counts()
+    parts = [_plural(counts["error"], "error"), _plural(counts["warning"], "warning")]
+    if counts["notice"]:
+        parts.append(_plural(counts["notice"], "notice"))
+    found = ", ".join(parts)
+    if result.baseline is not None:
+        found += (
+            f"; {counts['known']} known from baseline {printable(result.baseline)}, "
+            f"{result.resolved} resolved"
+        )
+    verdict = "FAILED" if result.failed else "passed"
+    return (
+        f"lensaudit check {verdict}: {_plural(len(result.files), 'file')}, "
+        f"{_plural(result.entries, 'distortion entry', 'distortion entries')}; {found}"
+    )
+
+
+def _plural(count: int, singular: str, plural: str | None = None) -> str:
+    return f"{count} {singular if count == 1 else plural or singular + 's'}"

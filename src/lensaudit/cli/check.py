@@ -1,0 +1,121 @@
+"""``lensaudit check``: the CI gate for a Lensfun database and changes to it."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import click
+
+from .options import database_paths, fail, output_file, output_stream
+
+FORMAT_NAMES = ("text", "json", "github", "junit")
+
+#: Exit status when a finding fails the check.
+EXIT_FINDINGS = 1
+
+
+@click.command()
+@database_paths
+@click.option(
+    "--baseline",
+    metavar="DIR_OR_REV",
+    default=None,
+    help="Only fail on entries that are new or changed since this database: "
+    "an existing directory (or file), else a git revision of the "
+    "repository holding PATH, e.g. origin/master or HEAD.",
+)
+@click.option(
+    "--margin",
+    type=float,
+    default=1.1,
+    show_default=True,
+    help="Warn about a fold outside the image when D(r_max) is less than "
+    "MARGIN times the image corner.",
+)
+@click.option(
+    "-f",
+    "--format",
+    "output_format",
+    type=click.Choice(FORMAT_NAMES),
+    default="text",
+    show_default=True,
+    help="text: one line per finding; json: everything as data; github: "
+    "workflow annotations on the pull request's lines; junit: JUnit XML.",
+)
+@output_file
+@click.option(
+    "-v", "--verbose", is_flag=True, help="Also report, as notices, every fold outside the image."
+)
+def check(
+    paths: tuple[Path, ...],
+    baseline: str | None,
+    margin: float,
+    output_format: str,
+    output: Path | None,
+    verbose: bool,
+) -> None:
+    """Fail when a Lensfun database, or a change to it, has models that fold.
+
+    PATH is a database directory (every *.xml in it) or XML files; without
+    PATH, the database bundled with lensfunpy is checked.
+
+    \b
+    Errors (fail the check):
+      fold-in-image        the model folds back inside its own image:
+                           D(r_max) < image corner hypot(aspect, 1)
+      xml-error            the file is not well-formed XML (line, column)
+      missing-attribute, bad-value, unknown-model, no-lens,
+      duplicate-lens, duplicate-focal, unreadable, r-max-not-computable
+    Warnings: fold-near-image (D(r_max) below MARGIN times the corner).
+    Notices (--verbose): fold-outside-image (any other finite r_max).
+
+    With --baseline, findings the baseline already has are reported as known
+    and do not fail: entries are matched by (maker, lens, crop factor, model,
+    focal), so only new or changed entries fail the check. A git revision is
+    read with git ls-tree and git cat-file; the work tree is not touched.
+
+    \b
+    Exit status:
+      0  no finding fails the check (warnings and known findings do not)
+      1  at least one new error
+      2  bad usage, or input or baseline that could not be read at all
+    """
+    from ..check import CheckError
+    from ..check import check as run_check
+    from ..check_formats import writer
+    from ..loader import LoadError
+
+    if not margin >= 1 or math.isinf(margin):
+        raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
+    try:
+        result = run_check(list(paths) or None, baseline=baseline, margin=margin, verbose=verbose)
+    except (CheckError, LoadError) as error:
+        fail(str(error))
+    if output_format == "github":
+        result = result.relative_to(_repository_root(paths))
+    with output_stream(output) as stream:
+        writer(output_format)(result, stream)
+    if result.failed:
+        raise SystemExit(EXIT_FINDINGS)
+
+
+def _repository_root(paths: tuple[Path, ...]) -> Path:
+    """Where GitHub's paths start: GITHUB_WORKSPACE, else the top level of the
+    git repository holding the first path (or the current directory)."""
+    workspace = os.environ.get("GITHUB_WORKSPACE")
+    if workspace:
+        return Path(workspace)
+    start = paths[0] if paths else Path.cwd()
+    directory = start if start.is_dir() else start.parent
+    try:
+        completed = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"], cwd=directory, capture_output=True, check=False
+        )
+    except OSError:
+        return Path.cwd()
+    if completed.returncode == 0 and completed.stdout.strip():
+        return Path(os.fsdecode(completed.stdout.strip()))
+    return Path.cwd()
