@@ -75,6 +75,8 @@ _STATUS_CODES = {
 #: Longest name and message put into a finding; hostile files can hold megabytes.
 NAME_LIMIT = 80
 MESSAGE_LIMIT = 400
+QUOTED_LIMIT = 40
+_QUOTED = re.compile(rf"'([^']{{{QUOTED_LIMIT}}})[^']{{2,}}'")
 
 
 class CheckError(LoadError):
@@ -88,8 +90,9 @@ class Finding:
     ``file`` is the path as shown to the user, ``line`` and ``column`` count
     from 1 (0 when unknown). ``entry_key`` is (maker, lens, crop factor,
     model, focal) for an entry, (maker, lens, crop factor) for a lens and ()
-    for a whole file; NaN values are None. ``known`` findings were already in
-    the baseline and never fail the check.
+    for a whole file; NaN values are None, names over :data:`NAME_LIMIT`
+    characters are cut. ``known`` findings were already in the baseline and
+    never fail the check.
     """
 
     severity: str
@@ -654,9 +657,21 @@ def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics]:
 
 
 def _clip(text: str, limit: int = MESSAGE_LIMIT) -> str:
-    """``text`` on one line, at most ``limit`` characters."""
-    text = " ".join(text.split())
+    """``text`` on one line, at most ``limit`` characters.
+
+    Quoted values are shortened first, so that the words after a huge value
+    (``'999...' overflows a double``) survive.
+    """
+    text = _QUOTED.sub(lambda m: f"'{m.group(1)[:QUOTED_LIMIT]}\u2026'", " ".join(text.split()))
     return text if len(text) <= limit else text[: limit - 1] + "\u2026"
+
+
+def _clip_key(key: tuple) -> tuple:
+    """An entry key fit for output: strings cut to :data:`NAME_LIMIT` characters."""
+    return tuple(
+        v[: NAME_LIMIT - 1] + "\u2026" if isinstance(v, str) and len(v) > NAME_LIMIT else v
+        for v in key
+    )
 
 
 def describe(entry: loader.DistortionEntry) -> str:
@@ -690,7 +705,7 @@ def _entry_finding(severity: str, code: str, entry: loader.DistortionEntry, text
         entry.line,
         0,
         _clip(f"{describe(entry)}: {text}"),
-        entry_key(entry),
+        _clip_key(entry_key(entry)),
     )
 
 
@@ -806,6 +821,6 @@ def _duplicate_lenses(read: list[_File]) -> Iterable[tuple[int, Finding, Hashabl
                 lens.line,
                 0,
                 _clip(text),
-                (lens.maker, lens.model, lens.crop_factor),
+                _clip_key((lens.maker, lens.model, lens.crop_factor)),
             )
             yield index, finding, (DUPLICATE_LENS, key)
