@@ -1,0 +1,203 @@
+"""``lensaudit history``: audit every revision of a Lensfun database kept in git."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from .options import fail
+
+
+@click.command()
+@click.argument("repository", metavar="REPO", type=click.Path(path_type=Path))
+@click.option(
+    "--path",
+    "db_path",
+    default="data/db",
+    show_default=True,
+    help="Database directory (or XML file) inside REPO, relative to its root.",
+)
+@click.option(
+    "--rev",
+    "revision",
+    default="HEAD",
+    show_default=True,
+    help="Revision whose history is audited.",
+)
+@click.option(
+    "--since",
+    metavar="DATE",
+    default=None,
+    help="Only commits from DATE on (YYYY-MM-DD[THH:MM], committer date).",
+)
+@click.option(
+    "--until",
+    metavar="DATE",
+    default=None,
+    help="Only commits up to DATE; a bare date includes the whole day.",
+)
+@click.option(
+    "--first-parent",
+    is_flag=True,
+    help="Follow only the first parent of merges: a merged branch counts as its merge commit.",
+)
+@click.option(
+    "-o",
+    "--output",
+    "output_dir",
+    required=True,
+    metavar="DIR",
+    type=click.Path(path_type=Path, file_okay=False),
+    help="Directory for history.csv, introduced.csv, trend.png and trend.svg.",
+)
+@click.option(
+    "--cache",
+    "cache_dir",
+    metavar="DIR",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Cache of audited file versions kept between runs [default: the user cache directory].",
+)
+@click.option("--no-cache", is_flag=True, help="Neither read nor write the cache.")
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+def history(
+    repository: Path,
+    db_path: str,
+    revision: str,
+    since: str | None,
+    until: str | None,
+    first_parent: bool,
+    output_dir: Path,
+    cache_dir: Path | None,
+    no_cache: bool,
+    quiet: bool,
+) -> None:
+    """Audit every revision of a Lensfun database kept in git.
+
+    Reads the commits of REPO oldest to newest through git (nothing is
+    checked out) and, for each commit that changes the database, counts the
+    distortion entries per model, those with a finite r_max and those that
+    fold inside their own image, in Hugin units and in the paper's units.
+
+    \b
+    Writes to DIR:
+      history.csv     one row per commit that changes the database
+      introduced.csv  each entry of the newest revision with a finite r_max,
+                      and the commit that introduced its coefficients
+      trend.png/.svg  entries, share with finite r_max and folds over time,
+                      the paper's snapshot (2021-05-30) marked
+
+    A progress bar is drawn when standard error is a terminal.
+    """
+    from ..history import HistoryError, audit_history, default_cache_dir
+
+    try:
+        output_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        fail(f"cannot create {output_dir}: {error.strerror or error}")
+    if no_cache:
+        cache_dir = None
+    elif cache_dir is None:
+        cache_dir = default_cache_dir()
+    bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
+    try:
+        result = audit_history(
+            repository,
+            db_path,
+            revision=revision,
+            since=since,
+            until=until,
+            first_parent=first_parent,
+            cache_dir=cache_dir,
+            progress=bar.update,
+        )
+    except HistoryError as error:
+        bar.close()
+        fail(str(error))
+    bar.close()
+    for warning in result.warnings:
+        click.echo(f"lensaudit: warning: {warning}", err=True)
+
+    written = _write_outputs(result, output_dir)
+    if not quiet:
+        _print_summary(result, written)
+
+
+class _ProgressBar:
+    """click's progress bar on standard error, created once the total is known."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.bar = None
+
+    def update(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            self.bar = click.progressbar(
+                length=total, label="Auditing file versions", file=sys.stderr, show_pos=True
+            )
+            self.bar.__enter__()
+        self.bar.update(done - self.bar.pos)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+            self.bar = None
+
+
+def _write_outputs(result, output_dir: Path) -> list[Path]:
+    from ..history import trend_figure
+
+    written = []
+    for name, write in (
+        ("history.csv", result.write_csv),
+        ("introduced.csv", result.write_introduced_csv),
+    ):
+        path = output_dir / name
+        try:
+            with open(path, "w", encoding="utf-8", newline="") as stream:
+                write(stream)
+        except OSError as error:
+            fail(f"cannot write {path}: {error.strerror or error}")
+        written.append(path)
+    mode = "first-parent line" if result.first_parent else "all commits"
+    figure = trend_figure(
+        result.to_dataframe(),
+        title=f"{result.path} of {result.repository.resolve().name} "
+        f"({mode}) up to {result.newest.date[:10]}",
+    )
+    for name in ("trend.png", "trend.svg"):
+        path = output_dir / name
+        try:
+            figure.savefig(path, dpi=150, metadata={"Date": None} if name.endswith("svg") else None)
+        except OSError as error:
+            fail(f"cannot write {path}: {error.strerror or error}")
+        written.append(path)
+    return written
+
+
+def _print_summary(result, written: list[Path]) -> None:
+    newest = result.newest
+    last = next((r for r in reversed(result.revisions) if r.mainline), None)
+    click.echo(
+        f"{result.path} in {result.repository}: {result.commits:,} commits, "
+        f"{len(result.revisions):,} change the database"
+    )
+    click.echo(
+        f"{result.blobs:,} file versions: {result.blobs_parsed:,} parsed, "
+        f"{result.blobs_cached:,} from the cache; {result.seconds:.1f} s"
+    )
+    if last is not None:
+        counts = last.counts
+        click.echo(
+            f"newest {newest.short} {newest.date[:10]}: {counts['audited']:,} entries "
+            f"audited, {counts['finite']:,} with finite r_max "
+            f"({100 * last.share_finite:.1f}%); folding inside their own image: "
+            f"{counts['folds_in_image']} ({counts['folds_in_image_rectilinear']} "
+            f"rectilinear), in the paper's units "
+            f"{counts['folds_in_image_paper_units_rectilinear']} rectilinear"
+        )
+    click.echo("wrote " + ", ".join(str(p) for p in written))

@@ -1,0 +1,663 @@
+"""`lensaudit history`: every revision of a database kept in git, and who introduced each fold.
+
+A small repository is built with a known history: files added, modified,
+renamed, reformatted and removed, a branch merged, a revision that is not
+well-formed XML and a later fix. Expected counts come from the closed-form
+r_max of the models used (see :func:`facts`), never from lensaudit.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import shutil
+import subprocess
+import textwrap
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from lensaudit import history as history_module
+from lensaudit import loader
+from lensaudit.cli import main
+from lensaudit.history import (
+    HISTORY_COLUMNS,
+    INTRODUCED_COLUMNS,
+    HistoryError,
+    audit_history,
+    audit_revision,
+    trend_figure,
+)
+
+# The shared data directory beside the project's checkout.
+BUNDLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "lensfun-db-history.bundle"
+
+HALF_DIAGONAL_MM = math.hypot(18, 12)
+CORNER_3_2 = math.hypot(1.5, 1)  # image corner in Hugin units for the default 3:2 aspect
+
+
+# ----------------------------------------------------------- the known history
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A distortion entry of the synthetic database (crop factor 1, aspect 3:2)."""
+
+    model: str
+    focal: float
+    coefficients: dict[str, str]
+
+    def xml(self) -> str:
+        attributes = " ".join(f'{k}="{v}"' for k, v in self.coefficients.items())
+        return f'<distortion model="{self.model}" focal="{self.focal:g}" {attributes}/>'
+
+
+def facts(entry: Entry) -> tuple[bool, bool, bool]:
+    """(finite r_max, folds inside the image, folds in the paper's units), closed form.
+
+    Only the families used here: poly3 with k1 < 0 has r_max^2 = (1-k1)/(-3 k1)
+    and D(r_max) = (2/3)(1-k1) r_max; ptlens with b = c = 0 and a < 0 has
+    r_max^3 = (1-a)/(-4a) and D(r_max) = (3/4)(1-a) r_max; poly5 with k2 = 0
+    and k1 < 0 has r_max^2 = -1/(3 k1) and D(r_max) = (2/3) r_max. Otherwise
+    D is increasing: r_max is infinite.
+    """
+    c = {k: float(v) for k, v in entry.coefficients.items()}
+    if entry.model == "poly3" and c["k1"] < 0:
+        k1 = c["k1"]
+        r_max = math.sqrt((1 - k1) / (-3 * k1))
+        d_max = 2 / 3 * (1 - k1) * r_max
+    elif entry.model == "ptlens" and c.get("a", 0) < 0 and not c.get("b") and not c.get("c"):
+        a = c["a"]
+        r_max = ((1 - a) / (-4 * a)) ** (1 / 3)
+        d_max = 3 / 4 * (1 - a) * r_max
+    elif entry.model == "poly5" and c["k1"] < 0 and not c.get("k2"):
+        d_max = 2 / 3 * math.sqrt(-1 / (3 * c["k1"]))
+    else:
+        return False, False, False
+    paper_corner = HALF_DIAGONAL_MM / entry.focal
+    return True, d_max / CORNER_3_2 < 1, d_max / paper_corner < 1
+
+
+# Lens name -> maker; every lens is rectilinear, crop factor 1, 3:2.
+MAKERS = {
+    "Acme 10-20mm": "Acme",
+    "Bolt 10-20mm": "Bolt",
+    "Echo 35mm": "Echo",
+    "Delta 30mm": "Delta",
+}
+
+A10 = Entry("poly3", 10, {"k1": "-0.01"})  # finite, no fold
+A10_NEW = Entry("poly3", 10, {"k1": "-0.5"})  # folds in both units
+A20 = Entry("poly3", 20, {"k1": "-0.02"})  # finite, no fold
+B10 = Entry("ptlens", 10, {"a": "-0.1", "b": "0", "c": "0"})  # folds in both units
+B10_REFORMATTED = Entry("ptlens", 10, {"a": "-0.100", "b": "0.0", "c": "0"})
+B20 = Entry("ptlens", 20, {"a": "0", "b": "0", "c": "0"})  # identity: infinite
+E35 = Entry("poly3", 35, {"k1": "-0.01"})  # finite, no fold
+D30 = Entry("poly5", 30, {"k1": "-0.1", "k2": "0"})  # folds only in Hugin units
+
+
+def db_file(lenses: dict[str, list[Entry]], comment: str = "") -> str:
+    blocks = []
+    for lens, entries in lenses.items():
+        lines = "\n".join(f"            {e.xml()}" for e in entries)
+        blocks.append(
+            textwrap.dedent("""\
+            <lens>
+                <maker>{maker}</maker>
+                <model>{lens}</model>
+                <mount>Test Mount</mount>
+                <cropfactor>1</cropfactor>
+                <calibration>
+            {lines}
+                </calibration>
+            </lens>""").format(maker=MAKERS[lens], lens=lens, lines=lines)
+        )
+    body = textwrap.indent("\n".join(blocks), "    ")
+    return f'<lensdatabase version="2">{comment}\n{body}\n</lensdatabase>\n'
+
+
+BROKEN_A = db_file({"Acme 10-20mm": [A10_NEW, A20]}).replace("</lens>", "</lense>")
+
+# The database after each commit: file -> {lens: entries}. None: not a database change.
+STATES = {
+    "c1": {"a.xml": {"Acme 10-20mm": [A10, A20]}},
+    "c2": {
+        "a.xml": {"Acme 10-20mm": [A10, A20]},
+        "b.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+    },
+    "c3": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "b.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+    },
+    "c4": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+    },
+    "c5": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+        "d.xml": {"Delta 30mm": [D30]},
+    },
+    "c7": {"a.xml": None, "c.xml": {"Bolt 10-20mm": [B10, B20]}, "e.xml": {"Echo 35mm": [E35]}},
+    "c8": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+    },
+    "c9": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B10, B20]},
+        "e.xml": {"Echo 35mm": [E35]},
+        "d.xml": {"Delta 30mm": [D30]},
+    },
+    "c10": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B10, B20]},
+        "d.xml": {"Delta 30mm": [D30]},
+    },
+    "c11": {
+        "a.xml": {"Acme 10-20mm": [A10_NEW, A20]},
+        "c.xml": {"Bolt 10-20mm": [B20, B10_REFORMATTED]},
+        "d.xml": {"Delta 30mm": [D30]},
+    },
+}
+BROKEN_COMMIT = "c7"
+MAINLINE = ["c1", "c2", "c3", "c4", "c7", "c8", "c9", "c10", "c11"]
+
+
+@dataclass
+class Repository:
+    path: Path
+    commits: dict[str, str]  # label -> hash
+
+    def git(self, *args: str) -> str:
+        return _git(self.path, *args)
+
+
+_GIT_ENV = {
+    "GIT_CONFIG_GLOBAL": os.devnull,
+    "GIT_CONFIG_NOSYSTEM": "1",
+    "GIT_AUTHOR_EMAIL": "test@example.org",
+    "GIT_COMMITTER_EMAIL": "test@example.org",
+    "GIT_COMMITTER_NAME": "Committer",
+    "GIT_OPTIONAL_LOCKS": "0",
+}
+
+
+def _git(path: Path, *args: str, author: str = "Tester", date: str = "") -> str:
+    env = dict(os.environ, **_GIT_ENV, GIT_AUTHOR_NAME=author)
+    if date:
+        env.update(GIT_AUTHOR_DATE=date, GIT_COMMITTER_DATE=date)
+    done = subprocess.run(
+        ["git", "-C", str(path), *args], env=env, check=True, capture_output=True, text=True
+    )
+    return done.stdout.strip()
+
+
+@pytest.fixture(scope="module")
+def repo(tmp_path_factory) -> Repository:
+    """The known history (dates 2020-01-NN at noon UTC, one commit a day):
+
+    c1 add a.xml; c2 add b.xml and e.xml; c3 modify A 10mm; c4 rename b.xml
+    to c.xml; c5 (branch) add d.xml; c6 change README only; c7 break a.xml;
+    c8 fix a.xml (new formatting, same entries); c9 merge the branch (no
+    fast-forward); c10 remove e.xml; c11 reorder and reformat c.xml.
+    """
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    path = tmp_path_factory.mktemp("history-repo")
+    _git(path, "init", "-q", "-b", "main")
+    db = path / "data" / "db"
+    db.mkdir(parents=True)
+    commits = {}
+
+    def commit(label: str, message: str, author: str, day: int) -> None:
+        date = f"2020-01-{day:02d}T12:00:00+00:00"
+        _git(path, "add", "-A")
+        _git(path, "commit", "-q", "-m", message, author=author, date=date)
+        commits[label] = _git(path, "rev-parse", "HEAD")
+
+    def write(name: str, lenses: dict[str, list[Entry]], comment: str = "") -> None:
+        (db / name).write_text(db_file(lenses, comment), encoding="utf-8")
+
+    (db / "lensfun-database.dtd").write_text("<!-- not a database file -->\n")
+    write("a.xml", STATES["c1"]["a.xml"])
+    commit("c1", "Add a.xml", "Alice", 1)
+    write("b.xml", STATES["c2"]["b.xml"])
+    write("e.xml", STATES["c2"]["e.xml"])
+    commit("c2", "Add b.xml and e.xml", "Bob", 2)
+    write("a.xml", STATES["c3"]["a.xml"])
+    commit("c3", "Recalibrate Acme at 10 mm", "Carol", 3)
+    _git(path, "mv", "data/db/b.xml", "data/db/c.xml")
+    commit("c4", "Rename b.xml to c.xml", "Bob", 4)
+    _git(path, "checkout", "-q", "-b", "feature")
+    write("d.xml", STATES["c5"]["d.xml"])
+    commit("c5", "Add Delta on a branch", "Dave", 5)
+    _git(path, "checkout", "-q", "main")
+    (path / "README").write_text("not the database\n")
+    commit("c6", "Add a README", "Alice", 6)
+    (db / "a.xml").write_text(BROKEN_A, encoding="utf-8")
+    commit("c7", "Break a.xml", "Alice", 7)
+    write("a.xml", STATES["c8"]["a.xml"], comment="<!-- repaired -->")
+    commit("c8", "Repair a.xml", "Carol", 8)
+    _git(
+        path,
+        "merge",
+        "-q",
+        "--no-ff",
+        "-m",
+        "Merge branch feature",
+        "feature",
+        author="Erin",
+        date="2020-01-09T12:00:00+00:00",
+    )
+    commits["c9"] = _git(path, "rev-parse", "HEAD")
+    (db / "e.xml").unlink()
+    commit("c10", "Remove e.xml", "Bob", 10)
+    write("c.xml", STATES["c11"]["c.xml"])
+    commit("c11", "Reorder and reformat c.xml", "Frank", 11)
+    return Repository(path, commits)
+
+
+def expected_counts(state: dict) -> dict[str, int]:
+    """Counts of a database state, from :func:`facts` (a broken file counts nothing)."""
+    counts = dict.fromkeys(
+        (
+            "audited",
+            "ptlens",
+            "poly3",
+            "poly5",
+            "finite",
+            "folds_in_image",
+            "folds_in_image_rectilinear",
+            "folds_in_image_paper_units_rectilinear",
+        ),
+        0,
+    )
+    for lenses in state.values():
+        for entries in (lenses or {}).values():
+            for entry in entries:
+                finite, folds, folds_paper = facts(entry)
+                counts["audited"] += 1
+                counts[entry.model] += 1
+                counts["finite"] += finite
+                counts["folds_in_image"] += folds
+                counts["folds_in_image_rectilinear"] += folds
+                counts["folds_in_image_paper_units_rectilinear"] += folds_paper
+    return counts
+
+
+def label_of(repo: Repository) -> dict[str, str]:
+    return {h: label for label, h in repo.commits.items()}
+
+
+# ------------------------------------------------------------------- counts
+
+
+def test_the_known_history_exercises_every_case():
+    outcomes = {facts(e) for e in (A10, A10_NEW, A20, B10, B20, E35, D30)}
+    assert outcomes == {
+        (True, False, False),
+        (True, True, True),
+        (False, False, False),
+        (True, True, False),
+    }
+
+
+def test_rows_are_the_commits_that_change_the_database_oldest_first(repo):
+    result = audit_history(repo.path)
+    labels = [label_of(repo)[r.commit.hash] for r in result.revisions]
+    assert labels == ["c1", "c2", "c3", "c4", "c5", "c7", "c8", "c9", "c10", "c11"]
+    assert result.commits == 11  # c6 touches only the README
+    assert result.newest.hash == repo.commits["c11"]
+
+
+def test_counts_per_commit_are_exactly_those_of_the_known_states(repo):
+    result = audit_history(repo.path)
+    for revision in result.revisions:
+        label = label_of(repo)[revision.commit.hash]
+        expected = expected_counts(STATES[label])
+        assert {k: revision.counts[k] for k in expected} == expected, label
+        assert revision.files == len(STATES[label])
+
+
+def test_counts_differ_between_hugin_and_paper_units(repo):
+    last = audit_history(repo.path).revisions[-1]
+    assert last.counts["folds_in_image"] == 3  # Acme 10 mm, Bolt 10 mm, Delta 30 mm
+    assert last.counts["folds_in_image_paper_units_rectilinear"] == 2  # not Delta 30 mm
+    assert last.counts["finite"] == 4 and last.share_finite == pytest.approx(4 / 5)
+
+
+def test_unparsable_revision_counts_nothing_from_that_file_and_says_why(repo):
+    result = audit_history(repo.path)
+    broken = next(r for r in result.revisions if r.commit.hash == repo.commits[BROKEN_COMMIT])
+    assert len(broken.errors) == 1 and broken.errors[0].startswith("a.xml: XML is not well-formed")
+    salvaged = len(loader.read_bytes(BROKEN_A.encode(), "a.xml")[0])
+    audited_elsewhere = expected_counts(STATES[BROKEN_COMMIT])["audited"]
+    assert broken.counts["entries"] == audited_elsewhere + salvaged
+    assert broken.record()["not_audited"] == salvaged
+    assert broken.record()["files_with_errors"] == 1
+
+
+def test_merge_and_branch_commits_are_flagged(repo):
+    rows = {label_of(repo)[r.commit.hash]: r.record() for r in audit_history(repo.path).revisions}
+    assert [label for label, row in rows.items() if row["merge"]] == ["c9"]
+    assert [label for label, row in rows.items() if not row["mainline"]] == ["c5"]
+
+
+def test_first_parent_lists_only_the_main_line(repo):
+    result = audit_history(repo.path, first_parent=True)
+    labels = [label_of(repo)[r.commit.hash] for r in result.revisions]
+    assert labels == MAINLINE
+    for label, revision in zip(labels, result.revisions, strict=True):
+        expected = expected_counts(STATES[label])
+        assert {k: revision.counts[k] for k in expected} == expected, label
+
+
+# ------------------------------------------------------------- introductions
+
+
+def introducers(result, repo) -> dict[tuple[str, str, float], str]:
+    """(file, lens, focal) -> label of the introducing commit ("" if before the range)."""
+    return {
+        (i.entry.file, i.entry.lens, i.entry.focal): label_of(repo)[i.commit.hash]
+        if i.commit
+        else ""
+        for i in result.introduced
+    }
+
+
+def test_introducing_commit_of_every_entry_with_finite_r_max(repo):
+    assert introducers(audit_history(repo.path), repo) == {
+        ("a.xml", "Acme 10-20mm", 10.0): "c3",  # modified by c3; broken by c7, repaired by c8
+        ("a.xml", "Acme 10-20mm", 20.0): "c1",  # untouched since c1, through c3, c7, c8
+        ("c.xml", "Bolt 10-20mm", 10.0): "c2",  # renamed by c4, reordered by c11
+        ("d.xml", "Delta 30mm", 30.0): "c5",  # the branch commit, not the merge
+    }
+
+
+def test_introduced_entries_carry_their_metrics_and_commit(repo):
+    result = audit_history(repo.path)
+    acme = next(
+        i for i in result.introduced if i.entry.lens == "Acme 10-20mm" and i.entry.focal == 10
+    )
+    assert acme.r_max == pytest.approx(1.0, rel=1e-12)  # sqrt(1.5 / 1.5)
+    assert acme.d_max == pytest.approx(1.0, rel=1e-12)  # (2/3)(1.5)
+    assert acme.r_normalized == pytest.approx(1 / CORNER_3_2, rel=1e-12)
+    assert acme.r_normalized_paper == pytest.approx(10 / HALF_DIAGONAL_MM, rel=1e-12)
+    assert acme.folds_in_image
+    assert (acme.commit.author, acme.commit.subject) == ("Carol", "Recalibrate Acme at 10 mm")
+    assert acme.commit.date == "2020-01-03T12:00:00+00:00"
+
+
+def test_first_parent_attributes_a_merged_branch_to_its_merge(repo):
+    found = introducers(audit_history(repo.path, first_parent=True), repo)
+    assert found[("d.xml", "Delta 30mm", 30.0)] == "c9"
+    assert found[("a.xml", "Acme 10-20mm", 10.0)] == "c3"
+
+
+def test_since_leaves_older_coefficients_unattributed(repo):
+    result = audit_history(repo.path, since="2020-01-03")
+    assert [label_of(repo)[r.commit.hash] for r in result.revisions][0] == "c3"
+    assert introducers(result, repo) == {
+        ("a.xml", "Acme 10-20mm", 10.0): "c3",
+        ("a.xml", "Acme 10-20mm", 20.0): "",
+        ("c.xml", "Bolt 10-20mm", 10.0): "",
+        ("d.xml", "Delta 30mm", 30.0): "c5",
+    }
+
+
+def test_until_makes_the_newest_revision_that_of_the_day(repo):
+    result = audit_history(repo.path, until="2020-01-04")  # the whole day
+    assert result.newest.hash == repo.commits["c4"]
+    assert introducers(result, repo) == {
+        ("a.xml", "Acme 10-20mm", 10.0): "c3",
+        ("a.xml", "Acme 10-20mm", 20.0): "c1",
+        ("c.xml", "Bolt 10-20mm", 10.0): "c2",
+        ("e.xml", "Echo 35mm", 35.0): "c2",
+    }
+
+
+# --------------------------------------------------------- reading and caching
+
+
+def test_each_distinct_file_version_is_parsed_once(repo, monkeypatch):
+    calls = []
+    real = loader.read_bytes
+    monkeypatch.setattr(
+        loader, "read_bytes", lambda data, name: calls.append(data) or real(data, name)
+    )
+    result = audit_history(repo.path)
+    objects = [
+        line.split(" ", 1) for line in repo.git("rev-list", "--objects", "--all").splitlines()
+    ]
+    xml_blobs = {
+        oid
+        for oid, *path in objects
+        if path and path[0].startswith("data/db/") and path[0].endswith(".xml")
+    }
+    # a.xml: c1, c3, broken, repaired; b.xml (renamed as is); c.xml reformatted; d; e.
+    assert len(xml_blobs) == 8
+    assert len(calls) == len(set(calls)) == len(xml_blobs) == result.blobs_parsed
+
+
+def test_the_disk_cache_spares_parsing_and_changes_nothing(repo, tmp_path, monkeypatch):
+    first = audit_history(repo.path, cache_dir=tmp_path)
+    calls = []
+    real = loader.read_bytes
+    monkeypatch.setattr(
+        loader, "read_bytes", lambda data, name: calls.append(name) or real(data, name)
+    )
+    second = audit_history(repo.path, cache_dir=tmp_path)
+    assert first.blobs_cached == 0 and second.blobs_cached == second.blobs
+    # Only the newest revision's files are read again, for their entries in full.
+    assert sorted(calls) == ["a.xml", "c.xml", "d.xml"] and second.blobs_parsed == 3
+    assert second.records() == first.records()
+    assert second.introduced_records() == first.introduced_records()
+
+
+def test_the_cache_is_keyed_by_lensaudit_version(repo, tmp_path, monkeypatch):
+    audit_history(repo.path, cache_dir=tmp_path)
+    monkeypatch.setattr(history_module, "__version__", "999.0")
+    again = audit_history(repo.path, cache_dir=tmp_path)
+    assert again.blobs_cached == 0
+    files = list(tmp_path.iterdir())  # the other version's cache is removed
+    assert len(files) == 1 and "999.0" in files[0].name
+
+
+def test_an_unusable_cache_directory_is_a_warning_not_an_error(repo, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    result = audit_history(repo.path, cache_dir=blocker)
+    assert result.revisions and result.warnings and "not used" in result.warnings[0]
+
+
+def test_work_tree_index_and_refs_are_left_as_they_are(repo):
+    (repo.path / "data" / "db" / "a.xml").write_text("uncommitted edit\n")
+    try:
+        index = repo.path / ".git" / "index"
+        before = (
+            repo.git("status", "--porcelain"),
+            repo.git("show-ref"),
+            index.stat().st_mtime_ns,
+            index.read_bytes(),
+        )
+        result = audit_history(repo.path)
+        after = (
+            repo.git("status", "--porcelain"),
+            repo.git("show-ref"),
+            index.stat().st_mtime_ns,
+            index.read_bytes(),
+        )
+        assert after == before
+        assert (repo.path / "data" / "db" / "a.xml").read_text() == "uncommitted edit\n"
+        assert result.revisions[-1].counts["audited"] == 5  # the committed a.xml
+    finally:
+        repo.git("checkout", "-q", "--", "data/db/a.xml")
+
+
+def test_audit_revision_reads_one_revision_from_scratch(repo):
+    audit = audit_revision(repo.path, repo.commits["c4"])
+    assert sorted(f.name for f in audit.files) == ["a.xml", "c.xml", "e.xml"]
+    assert audit.summary.audited == expected_counts(STATES["c4"])["audited"]
+
+
+# -------------------------------------------------------------------- errors
+
+
+def test_a_directory_that_is_not_a_repository_is_refused(tmp_path):
+    with pytest.raises(HistoryError, match="not a git repository"):
+        audit_history(tmp_path)
+
+
+def test_a_path_absent_at_every_revision_is_refused(repo):
+    with pytest.raises(HistoryError, match="does not exist at any of the 11 commits"):
+        audit_history(repo.path, "data/nowhere")
+
+
+def test_a_path_without_xml_at_any_revision_is_refused(repo):
+    with pytest.raises(HistoryError, match="no \\*.xml file at any of the 11 commits"):
+        audit_history(repo.path, ".")
+
+
+@pytest.mark.parametrize("since", ["yesterday", "2020-13-45", "garbage"])
+def test_dates_git_would_guess_at_are_refused(repo, since):
+    with pytest.raises(HistoryError, match="is not a date"):
+        audit_history(repo.path, since=since)
+
+
+def test_an_empty_date_range_is_refused(repo):
+    with pytest.raises(HistoryError, match="no commit"):
+        audit_history(repo.path, until="2019-12-31")
+
+
+# ----------------------------------------------------------------------- CLI
+
+
+def test_cli_writes_the_four_outputs(repo, tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        main, ["history", str(repo.path), "-o", str(out), "--no-cache", "-q"]
+    )
+    assert result.exit_code == 0, result.output
+    assert result.output == ""  # quiet: no progress bar off a terminal, no summary
+    assert sorted(p.name for p in out.iterdir()) == [
+        "history.csv",
+        "introduced.csv",
+        "trend.png",
+        "trend.svg",
+    ]
+    rows = list(csv.DictReader(io.StringIO((out / "history.csv").read_text())))
+    assert tuple(rows[0]) == HISTORY_COLUMNS
+    assert [r["commit"] for r in rows][-1] == repo.commits["c11"]
+    assert rows[-1]["folds_in_image"] == "3" and rows[-1]["mainline"] == "true"
+    introduced = list(csv.DictReader(io.StringIO((out / "introduced.csv").read_text())))
+    assert tuple(introduced[0]) == INTRODUCED_COLUMNS
+    assert {(r["lens"], r["commit"]) for r in introduced if r["folds_in_image"] == "true"} == {
+        ("Acme 10-20mm", repo.commits["c3"]),
+        ("Bolt 10-20mm", repo.commits["c2"]),
+        ("Delta 30mm", repo.commits["c5"]),
+    }
+    assert (out / "trend.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<svg" in (out / "trend.svg").read_bytes()[:500]
+
+
+def test_cli_summary_names_the_newest_revision(repo, tmp_path):
+    result = CliRunner().invoke(
+        main, ["history", str(repo.path), "-o", str(tmp_path), "--cache", str(tmp_path / "cache")]
+    )
+    assert result.exit_code == 0, result.output
+    assert "11 commits, 10 change the database" in result.output
+    assert f"newest {repo.commits['c11'][:7]} 2020-01-11" in result.output
+    assert "Auditing" not in result.output  # no progress bar off a terminal
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--path", "data/nowhere"], "does not exist at any"),
+        (["--since", "last week"], "is not a date"),
+        (["--rev", "no-such-branch"], "is not a commit"),
+    ],
+)
+def test_cli_bad_input_is_one_line_and_exit_2(repo, tmp_path, args, message):
+    result = CliRunner().invoke(
+        main, ["history", str(repo.path), "-o", str(tmp_path), "--no-cache", *args]
+    )
+    assert result.exit_code == 2
+    assert message in result.output and "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_cli_refuses_a_directory_that_is_not_a_repository(tmp_path):
+    (tmp_path / "plain").mkdir()
+    result = CliRunner().invoke(
+        main, ["history", str(tmp_path / "plain"), "-o", str(tmp_path / "out"), "--no-cache"]
+    )
+    assert result.exit_code == 2
+    assert result.output.strip() == f"lensaudit: error: {tmp_path / 'plain'}: not a git repository"
+
+
+def test_trend_figure_marks_the_paper_snapshot(repo):
+    import numpy as np
+    from matplotlib.dates import date2num
+
+    figure = trend_figure(audit_history(repo.path).to_dataframe())
+    top, bottom = figure.axes[:2]
+    snapshot = date2num(np.datetime64("2021-05-30"))
+    for axes in (top, bottom):
+        assert any(
+            list(date2num(np.asarray(line.get_xdata()))) == [snapshot, snapshot]
+            for line in axes.lines
+        )
+    labels = [line.get_label() for line in bottom.lines]
+    assert any("paper's mixed units" in label for label in labels)
+    assert any("Hugin units" in label for label in labels)
+
+
+# --------------------------------------------------- the real Lensfun history
+
+
+@pytest.fixture(scope="session")
+def lensfun_history(tmp_path_factory) -> Path:
+    """A clone of the Lensfun database's history, from the shared bundle."""
+    if not BUNDLE.exists():
+        pytest.skip(f"the Lensfun history bundle is not available ({BUNDLE})")
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    clone = tmp_path_factory.mktemp("lensfun-db") / "lensfun-db"
+    subprocess.run(
+        ["git", "clone", "-q", "--no-checkout", str(BUNDLE), str(clone)],
+        check=True,
+        capture_output=True,
+    )
+    return clone
+
+
+def _paper_revision(clone: Path) -> str:
+    return _git(clone, "log", "--until=2021-05-30T23:59", "-1", "--format=%H")
+
+
+def test_the_paper_snapshot_has_the_papers_entry_counts(lensfun_history):
+    audit = audit_revision(lensfun_history, _paper_revision(lensfun_history))
+    counts = {row.model: row.total for row in audit.summary.rows}
+    assert (counts["ptlens"], counts["poly3"], counts["poly5"]) == (4196, 872, 5)
+
+
+def test_history_up_to_the_paper_snapshot_agrees_with_auditing_it_alone(lensfun_history):
+    result = audit_history(lensfun_history, since="2021-05-01", until="2021-05-30")
+    assert result.newest.hash == _paper_revision(lensfun_history)
+    last = [r for r in result.revisions if r.mainline][-1].counts
+    assert (last["ptlens"], last["poly3"], last["poly5"]) == (4196, 872, 5)
+    alone = audit_revision(lensfun_history, result.newest.hash).summary
+    assert last["finite"] == alone.total.finite
+    assert last["folds_in_image"] == len(alone.folding)
+    assert last["folds_in_image_paper_units_rectilinear"] == alone.folding_paper_units_rectilinear
