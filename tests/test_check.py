@@ -317,6 +317,13 @@ def test_adding_a_second_copy_of_a_known_duplicate_fails(two_databases):
     ]
 
 
+def test_findings_of_a_file_that_no_longer_parses_are_not_counted_resolved(two_databases):
+    before, after = two_databases([FOLDING], [FOLDING.replace("/>", ">")])
+    result = check(after, baseline=before)
+    assert [(f.code, f.known) for f in result.findings] == [("xml-error", False)]
+    assert result.resolved == 0
+
+
 def test_baseline_directory_without_xml_cannot_be_checked(two_databases, tmp_path):
     _, after = two_databases([FINE], [FINE])
     (tmp_path / "empty").mkdir()
@@ -414,5 +421,6 @@ def test_analyse_gives_each_finding_an_identity_for_baseline_matching(write_xml)
     path = write_xml(lens_xml(FOLDING))
     files, findings = checking.analyse(checking.sources_from_paths([path]))
     assert [f.entries for f in files] == [1]
-    [(finding, identity)] = findings
+    [(finding, identity, name)] = findings
     assert identity[0] == finding.code == "fold-in-image"
+    assert name == path.name

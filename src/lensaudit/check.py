@@ -33,7 +33,6 @@ import math
 import os
 import re
 import subprocess
-from collections import Counter
 from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -211,23 +210,24 @@ def check(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
     files, current = analyse(sources, margin, verbose)
+    findings = [finding for finding, _, _ in current]
     resolved = 0
     baseline_label = None
     if baseline is not None:
         baseline_label = os.fspath(baseline)
         _, before = analyse(baseline_sources(baseline_label, source.paths), margin, verbose)
-        remaining = Counter(identity for _, identity in before)
-        marked = []
-        for finding, identity in current:
-            if remaining[identity] > 0:
-                remaining[identity] -= 1
-                finding = replace(finding, known=True)
-            marked.append((finding, identity))
-        current = marked
-        resolved = sum(remaining.values())
-    return CheckResult(
-        source.label, baseline_label, margin, files, [finding for finding, _ in current], resolved
-    )
+        remaining: dict[Hashable, list[str]] = {}
+        for _, identity, name in before:
+            remaining.setdefault(identity, []).append(name)
+        for index, (finding, identity, _) in enumerate(current):
+            if remaining.get(identity):
+                remaining[identity].pop()
+                findings[index] = replace(finding, known=True)
+        # Entries of a file that no longer parses are not checked: their
+        # findings are not gone, only unseen.
+        broken = {name for finding, _, name in current if finding.code == XML_ERROR}
+        resolved = sum(name not in broken for names in remaining.values() for name in names)
+    return CheckResult(source.label, baseline_label, margin, files, findings, resolved)
 
 
 # ---------------------------------------------------------------------------
@@ -544,9 +544,12 @@ def _lens_structure(root) -> tuple[tuple[_Lens, ...], dict]:
 
 def analyse(
     sources: Sequence[Source], margin: float = DEFAULT_MARGIN, verbose: bool = False
-) -> tuple[list[CheckedFile], list[tuple[Finding, Hashable]]]:
-    """Files and findings of one database; each finding with the identity that
-    matches it against a baseline's."""
+) -> tuple[list[CheckedFile], list[tuple[Finding, Hashable, str]]]:
+    """Files and findings of one database.
+
+    Each finding comes with the identity that matches it against a
+    baseline's, and the name of its file.
+    """
     read = [_read(source) for source in sources]
     files = [
         CheckedFile(
@@ -590,7 +593,10 @@ def analyse(
     for index, finding, identity in _duplicate_lenses(read):
         add(index, finding, identity)
     ordered.sort(key=lambda item: item[0])
-    return files, [(finding, identity) for _, finding, identity in ordered]
+    return files, [
+        (finding, identity, Path(read[key[0]].source.name).name)
+        for key, finding, identity in ordered
+    ]
 
 
 def entry_key(entry: loader.DistortionEntry) -> tuple:
