@@ -424,3 +424,22 @@ def test_analyse_gives_each_finding_an_identity_for_baseline_matching(write_xml)
     [(finding, identity, name)] = findings
     assert identity[0] == finding.code == "fold-in-image"
     assert name == path.name
+
+
+def test_entry_whose_r_max_cannot_be_computed_is_an_error_and_the_others_are_checked(
+    write_xml, monkeypatch
+):
+    from lensaudit import pipeline
+
+    real = pipeline.audit_entries
+
+    def failing(entries, *args, **kwargs):
+        if any(e.focal == 12 for e in entries):
+            raise FloatingPointError("solver failed")
+        return real(entries, *args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "audit_entries", failing)
+    path = write_xml(lens_xml(FOLDING, '<distortion model="poly3" focal="12" k1="0.01"/>'))
+    result = check(path)
+    assert codes(result) == [("error", "fold-in-image", 10), ("error", "r-max-not-computable", 11)]
+    assert "FloatingPointError: solver failed" in result.findings[1].message
