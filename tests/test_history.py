@@ -623,6 +623,17 @@ def test_trend_figure_marks_the_paper_snapshot(repo):
     assert any("Hugin units" in label for label in labels)
 
 
+def test_trend_figure_takes_history_csv_read_back(repo, tmp_path):
+    import pandas
+
+    with open(tmp_path / "history.csv", "w", encoding="utf-8", newline="") as stream:
+        audit_history(repo.path).write_csv(stream)
+    figure = trend_figure(pandas.read_csv(tmp_path / "history.csv"))
+    entries = figure.axes[0].lines[0]
+    assert len(entries.get_xdata()) == len(MAINLINE)  # the branch commit c5 is left out
+    assert list(entries.get_ydata()) == [expected_counts(STATES[c])["audited"] for c in MAINLINE]
+
+
 # --------------------------------------------------- the real Lensfun history
 
 
@@ -661,3 +672,21 @@ def test_history_up_to_the_paper_snapshot_agrees_with_auditing_it_alone(lensfun_
     assert last["finite"] == alone.total.finite
     assert last["folds_in_image"] == len(alone.folding)
     assert last["folds_in_image_paper_units_rectilinear"] == alone.folding_paper_units_rectilinear
+
+
+def test_introducing_commits_hold_the_entry_and_their_parents_do_not(lensfun_history):
+    from lensaudit.history import entry_identity
+
+    result = audit_history(lensfun_history, since="2021-01-01", until="2021-05-30")
+    dated = [i for i in result.introduced if i.commit is not None]
+    assert dated and len(dated) < len(result.introduced)  # the rest predates 2021
+
+    def identities(revision: str) -> set:
+        audit = audit_revision(lensfun_history, revision)
+        return {entry_identity(e) for e in audit.entries if e.status == "ok"}
+
+    for introduced in dated[:: max(1, len(dated) // 4)][:4]:
+        identity = entry_identity(introduced.entry)
+        assert identity in identities(introduced.commit.hash)
+        for parent in introduced.commit.parents:
+            assert identity not in identities(parent)

@@ -340,7 +340,8 @@ class _Git:
     def __init__(self, repository: str | os.PathLike[str]) -> None:
         self.repository = Path(repository)
         if not self.repository.is_dir():
-            raise HistoryError(f"{repository}: no such directory")
+            problem = "not a directory" if self.repository.exists() else "no such directory"
+            raise HistoryError(f"{repository}: {problem}")
         self._environment = dict(os.environ, **_GIT_ENVIRONMENT)
         try:
             self.run("rev-parse", "--git-dir")
