@@ -1,0 +1,81 @@
+"""``lensaudit report``: tables, figures and a self-contained HTML page in a directory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .options import database_paths, fail
+
+
+@click.command()
+@database_paths
+@click.option(
+    "-o",
+    "--output",
+    "output_dir",
+    required=True,
+    metavar="DIR",
+    type=click.Path(path_type=Path),
+    help="Directory to write the report into (created if needed).",
+)
+@click.option("--force", is_flag=True, help="Replace report files already in DIR.")
+@click.option(
+    "--paper",
+    is_flag=True,
+    help="Also put the paper's printed Tables 1-2 and values beside this audit, "
+    "each difference explained (paper_comparison.md, and in report.html).",
+)
+def report(paths: tuple[Path, ...], output_dir: Path, force: bool, paper: bool) -> None:
+    """Write tables, figures and a self-contained HTML report into DIR.
+
+    PATH is a database directory (every *.xml in it) or XML files. Without
+    PATH, the database bundled with lensfunpy is audited.
+
+    \b
+    DIR receives:
+      entries.csv            every entry with its metrics (as `scan -f csv`)
+      summary.json           counts, provenance, the folding entries
+      table1.md, table1.csv  the paper's Table 1: finite / infinite r_max per model
+      table2.md, table2.csv  the paper's Table 2: tail sign of the finite ones
+      folding.csv            entries whose fold lies inside their own image
+      fig5_r_normalized.*    the paper's Figure 5 (png, svg, and its counts as csv)
+      report.html            one self-contained page: all of the above, browsable
+      paper_comparison.md    with --paper only
+
+    Existing report files in DIR are replaced only with --force.
+    """
+    from ..loader import LoadError
+    from ..pipeline import run
+    from ..report import ReportExistsError, write_report
+
+    values = None
+    if paper:
+        from ..report.paper import PaperValuesError, load_values
+
+        try:
+            values = load_values()
+        except PaperValuesError as error:
+            fail(str(error))
+    try:
+        audit = run(list(paths) or None)
+    except LoadError as error:
+        fail(str(error))
+    if audit.files and all(f.error for f in audit.files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
+    try:
+        written = write_report(audit, output_dir, force=force, paper_values=values)
+    except ReportExistsError as error:
+        fail(str(error))
+    except OSError as error:
+        fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
+    summary = audit.summary
+    click.echo(
+        f"{summary.entries} entries audited, {summary.total.finite} with a finite "
+        f"r_max, {len(summary.folding)} folding inside their image."
+    )
+    click.echo(
+        f"Wrote {len(written)} files into {output_dir}; open "
+        f"{output_dir / 'report.html'} in a browser."
+    )

@@ -1,0 +1,148 @@
+"""One entry's distortion curve D(r) and its slope D'(r), sampled for plotting.
+
+Radii are in Hugin units (r = 1 is half the short side of the calibration
+image), r undistorted and D(r) distorted, as in :mod:`lensaudit.metrics`.
+This module is numpy only: the matplotlib figure is drawn in
+:mod:`lensaudit.report.figures`, the small inline SVG sketch here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from html import escape
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import normalizer
+from ..loader import DistortionEntry
+
+FloatArray = NDArray[np.float64]
+
+#: Plot at most this many image-corner radii out, so that the image stays readable
+#: when r_max is very far away (then r_max is noted as off the plot).
+MAX_EXTENT_CORNERS = 6.0
+
+
+def entry_cubic(entry: DistortionEntry) -> normalizer.Cubic:
+    """The normalized model of an audited entry (ptlens, poly3 or poly5).
+
+    Raises ``ValueError`` for any other model.
+    """
+    if entry.model == "ptlens":
+        return normalizer.ptlens(entry.a, entry.b, entry.c)
+    if entry.model == "poly3":
+        return normalizer.poly3(entry.k1)
+    if entry.model == "poly5":
+        return normalizer.poly5(entry.k1, entry.k2)
+    raise ValueError(f"model {entry.model!r} is not one lensaudit can plot")
+
+
+def distortion_coefficients(entry: DistortionEntry) -> FloatArray:
+    """Coefficients of D(r), highest power first (as numpy.polyval expects)."""
+    return np.asarray(entry_cubic(entry).distortion, dtype=np.float64).reshape(-1)
+
+
+def plot_extent(r_max: float, r_corner: float) -> float:
+    """Largest undistorted radius worth plotting: past r_max and past the corner.
+
+    1.5 r_max when that shows the corner too, at least 1.3 corner radii, at most
+    :data:`MAX_EXTENT_CORNERS` corner radii (r_max may be far off the plot then).
+    """
+    corner = r_corner if math.isfinite(r_corner) and r_corner > 0 else 1.0
+    if math.isfinite(r_max) and r_max > 0:
+        return float(min(max(1.5 * r_max, 1.3 * corner), MAX_EXTENT_CORNERS * corner))
+    return 1.5 * corner
+
+
+@dataclass(frozen=True)
+class Curve:
+    """D(r) and D'(r) at radii ``r`` (all Hugin units; D' is dimensionless)."""
+
+    r: FloatArray
+    d: FloatArray
+    slope: FloatArray
+    r_max: float
+    d_max: float
+    r_corner: float
+
+
+def sample(
+    entry: DistortionEntry,
+    r_max: float,
+    d_max: float,
+    r_corner: float,
+    points: int = 400,
+    extent: float | None = None,
+) -> Curve:
+    """D and D' of an entry at ``points`` radii from 0 to ``extent`` (default
+    :func:`plot_extent`)."""
+    coefficients = distortion_coefficients(entry)
+    end = plot_extent(r_max, r_corner) if extent is None else float(extent)
+    r = np.linspace(0.0, end, points)
+    d = np.polyval(coefficients, r)
+    slope = np.polyval(np.polyder(coefficients), r)
+    return Curve(r, d, slope, float(r_max), float(d_max), float(r_corner))
+
+
+def sketch_svg(curve: Curve, width: int = 260, height: int = 150) -> str:
+    """A small SVG of D(r) for inlining in HTML: the curve, r_max and the image corner.
+
+    The horizontal line is the image corner radius (distorted); the model folds
+    inside the image when the curve's peak at r_max stays below it.
+    """
+    pad_left, pad_right, pad_top, pad_bottom = 34, 8, 8, 22
+    plot_w = width - pad_left - pad_right
+    plot_h = height - pad_top - pad_bottom
+    top = 1.15 * max(curve.r_corner, float(np.nanmax(curve.d)) if curve.d.size else 1.0)
+    bottom = min(0.0, max(float(np.nanmin(curve.d)), -0.5 * top))
+    x_end = float(curve.r[-1]) if curve.r.size else 1.0
+
+    def x(value: float) -> float:
+        return pad_left + plot_w * value / x_end
+
+    def y(value: float) -> float:
+        clipped = min(max(value, bottom), top)
+        return pad_top + plot_h * (top - clipped) / (top - bottom)
+
+    points = " ".join(f"{x(r):.1f},{y(d):.1f}" for r, d in zip(curve.r, curve.d, strict=True))
+    parts = [
+        f'<svg width="{width}" height="{height}" '
+        f'viewBox="0 0 {width} {height}" role="img" aria-label="D(r) of this entry">',
+        f'<rect x="{pad_left}" y="{pad_top}" width="{plot_w}" height="{plot_h}" '
+        f'fill="#fff" stroke="#999"/>',
+    ]
+    if bottom < 0:
+        parts.append(
+            f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(0):.1f}" '
+            f'y2="{y(0):.1f}" stroke="#ccc"/>'
+        )
+    parts.append(
+        f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(curve.r_corner):.1f}" '
+        f'y2="{y(curve.r_corner):.1f}" stroke="#1f77b4" stroke-dasharray="4 3"/>'
+    )
+    parts.append(f'<polyline points="{points}" fill="none" stroke="#222" stroke-width="1.5"/>')
+    if math.isfinite(curve.r_max) and curve.r_max <= x_end:
+        parts.append(
+            f'<line x1="{x(curve.r_max):.1f}" x2="{x(curve.r_max):.1f}" y1="{pad_top}" '
+            f'y2="{pad_top + plot_h}" stroke="#d62728" stroke-dasharray="3 2"/>'
+        )
+        parts.append(
+            f'<circle cx="{x(curve.r_max):.1f}" cy="{y(curve.d_max):.1f}" r="3" fill="#d62728"/>'
+        )
+    labels = [
+        (pad_left - 3, y(curve.r_corner) + 4, "end", "#1f77b4", f"{curve.r_corner:.2f}"),
+        (pad_left - 3, y(0) + 4, "end", "#555", "0"),
+        (pad_left + plot_w, height - 6, "end", "#555", f"r = {x_end:.2f}"),
+        (pad_left + 3, pad_top + 12, "start", "#222", "D(r)"),
+    ]
+    if math.isfinite(curve.r_max) and curve.r_max <= x_end:
+        labels.append((x(curve.r_max), height - 6, "middle", "#d62728", f"r_max {curve.r_max:.3g}"))
+    for lx, ly, anchor, colour, text in labels:
+        parts.append(
+            f'<text x="{lx:.1f}" y="{ly:.1f}" text-anchor="{anchor}" fill="{colour}" '
+            f'font-size="10" font-family="sans-serif">{escape(text)}</text>'
+        )
+    parts.append("</svg>")
+    return "".join(parts)

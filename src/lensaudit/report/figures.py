@@ -1,0 +1,281 @@
+"""Every matplotlib figure of lensaudit: Figures 3, 4, 5 and 6 of the paper.
+
+Figures are drawn on the Agg canvas explicitly, without pyplot, so that no
+display is needed and no global plotting state is touched. Output is
+reproducible: no dates in the files, fixed SVG ids.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import LogNorm
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+from matplotlib.ticker import NullFormatter
+
+from .histogram import BINS_PER_DECADE
+
+if TYPE_CHECKING:
+    from .curves import Curve
+    from .histogram import Histogram
+    from .rmax_map import RMaxMap
+    from .warp import Warp
+
+RED = "#d62728"
+BLUE = "#1f77b4"
+GREEN = "#2ca02c"
+GREY = "#7f7f7f"
+
+#: Colour range of r_max maps; values beyond are drawn in the end colours.
+R_MAX_SHOWN = (0.25, 4.0)
+
+_STYLE = {"svg.hashsalt": "lensaudit", "svg.fonttype": "path", "font.size": 9}
+_METADATA = {
+    "svg": {"Date": None, "Creator": None, "Format": None, "Type": None},
+    "png": {"Software": None},
+}
+
+
+def new_figure(
+    width_inches: float, height_inches: float, dpi: float = 100, layout: str | None = None
+) -> Figure:
+    """A figure on an Agg canvas."""
+    figure = Figure(figsize=(width_inches, height_inches), dpi=dpi, layout=layout)
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def save(figure: Figure, path: Path | io.IOBase, fmt: str | None = None) -> None:
+    """Write ``figure`` as PNG or SVG (format from ``fmt`` or the file suffix)."""
+    fmt = fmt or Path(str(path)).suffix.lstrip(".").lower()
+    with matplotlib.rc_context(_STYLE):
+        figure.savefig(path, format=fmt, metadata=_METADATA.get(fmt))
+
+
+def inline_svg(figure: Figure, prefix: str) -> str:
+    """The figure as an ``<svg>`` element for embedding in HTML.
+
+    The XML prolog and namespace declarations are dropped (HTML parsers know
+    SVG) and every id is prefixed, so that several figures in one page cannot
+    share an id.
+    """
+    buffer = io.StringIO()
+    save(figure, buffer, "svg")
+    text = buffer.getvalue()
+    text = text[text.index("<svg") :]
+    text = re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text, count=2)
+    ids = set(re.findall(r'\sid="([^"]+)"', text))
+
+    def rename(match: re.Match[str]) -> str:
+        name = match.group(2)
+        return f"{match.group(1)}{prefix}-{name}" if name in ids else match.group(0)
+
+    text = re.sub(r'(\sid="|#)([\w.\-]+)', rename, text)
+    return text.strip()
+
+
+def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: str) -> None:
+    edges = histogram.edges
+    shown = counts > 0
+    axes.bar(
+        edges[:-1][shown],
+        counts[shown],
+        width=np.diff(edges)[shown],
+        align="edge",
+        color=colour,
+        edgecolor="white",
+        linewidth=0.4,
+        label=label,
+    )
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.set_xlim(edges[0], edges[-1])
+    axes.axvline(1.0, color=RED, linestyle="--", linewidth=1.2)
+    axes.grid(True, which="major", color="#dddddd", linewidth=0.5)
+    axes.set_axisbelow(True)
+
+
+def figure5(histogram: Histogram) -> Figure:
+    """The paper's Figure 5, correct units (left) beside its mixed units (right).
+
+    Bars are drawn for non-empty bins only (a log axis has no zero); the
+    r_normalized = 1 line separates models that fold inside their image.
+    """
+    figure = new_figure(10, 4.2)
+    left, right = figure.subplots(1, 2, sharey=True)
+    _bars(left, histogram, histogram.counts, BLUE, "r_normalized")
+    _bars(right, histogram, histogram.counts_paper, GREY, "r_normalized_paper")
+    left.set_title("Correct units: D(r_max) / hypot(aspect, 1)", fontsize=9)
+    right.set_title(
+        "Paper's mixed units: D(r_max) / (hypot(18, 12) / (crop \u00b7 focal))", fontsize=9
+    )
+    left.set_xlabel("r_normalized (Hugin units, both sides)")
+    right.set_xlabel("r_normalized_paper (as in the paper's Figure 5)")
+    left.set_ylabel("entries per bin")
+    top = max(int(histogram.counts.max(initial=0)), int(histogram.counts_paper.max(initial=0)), 1)
+    left.set_ylim(0.7, top * 2.5)
+    for axes, below, not_drawn in (
+        (left, histogram.below_one, histogram.not_drawn),
+        (right, histogram.below_one_paper, histogram.not_drawn_paper),
+    ):
+        note = f"{below} below 1 (fold inside the image)"
+        if not_drawn:
+            note += f"\n{not_drawn} with r_normalized \u2264 0 not drawn"
+        axes.text(
+            0.98, 0.96, note, transform=axes.transAxes, ha="right", va="top", color=RED, fontsize=8
+        )
+        axes.text(
+            1.0,
+            0.90,
+            " r_normalized = 1",
+            transform=axes.get_xaxis_transform(),
+            color=RED,
+            fontsize=8,
+            va="top",
+            ha="left",
+        )
+    figure.suptitle(
+        f"Finite r_normalized of {histogram.entries} rectilinear entries "
+        f"(log-log histogram, {BINS_PER_DECADE} bins per decade)",
+        fontsize=10,
+    )
+    figure.subplots_adjust(left=0.07, right=0.99, bottom=0.13, top=0.86, wspace=0.06)
+    return figure
+
+
+def curve_figure(curve: Curve, title: str) -> Figure:
+    """D(r) and D'(r) of one entry with r_max and the image corner marked (Figure 4 style).
+
+    Radii in Hugin units. The dashed blue line is the image corner radius
+    (distorted); the model folds inside the image when D peaks below it.
+    """
+    figure = new_figure(7, 6)
+    top, bottom = figure.subplots(2, 1, sharex=True)
+    top.plot(curve.r, curve.d, color="black", linewidth=1.5, label="D(r)")
+    top.plot(curve.r, curve.r, color=GREY, linewidth=0.8, linestyle=":", label="D(r) = r")
+    top.axhline(
+        curve.r_corner,
+        color=BLUE,
+        linestyle="--",
+        linewidth=1,
+        label=f"image corner, hypot(aspect, 1) = {curve.r_corner:.3f}",
+    )
+    bottom.plot(curve.r, curve.slope, color="black", linewidth=1.5, label="D'(r)")
+    bottom.axhline(0.0, color=GREY, linewidth=0.8)
+    end = float(curve.r[-1])
+    if math.isfinite(curve.r_max) and curve.r_max <= end:
+        for axes in (top, bottom):
+            axes.axvline(curve.r_max, color=RED, linestyle="--", linewidth=1)
+        top.plot(
+            [curve.r_max],
+            [curve.d_max],
+            "o",
+            color=RED,
+            label=f"r_max = {curve.r_max:.4g}, D(r_max) = {curve.d_max:.4g}",
+        )
+    elif math.isfinite(curve.r_max):
+        top.plot([], [], " ", label=f"r_max = {curve.r_max:.4g} (beyond the plot)")
+    else:
+        top.plot([], [], " ", label="r_max = \u221e (D is increasing)")
+    low, high = np.nanmin(curve.d), np.nanmax(curve.d)
+    span = max(high, curve.r_corner) * 1.15
+    top.set_ylim(max(low, -0.6 * span) - 0.05 * span, span)
+    slope_low = max(float(np.nanmin(curve.slope)), -2.0)
+    bottom.set_ylim(slope_low - 0.1, max(float(np.nanmax(curve.slope)), 1.0) + 0.1)
+    top.set_ylabel("distorted radius D(r)")
+    bottom.set_ylabel("D'(r)")
+    bottom.set_xlabel("undistorted radius r (Hugin units: 1 = half the short image side)")
+    top.set_xlim(0, end)
+    for axes in (top, bottom):
+        axes.grid(True, color="#e5e5e5", linewidth=0.5)
+        axes.legend(loc="best", fontsize=8, frameon=False)
+    top.set_title(title, fontsize=9)
+    figure.subplots_adjust(left=0.11, right=0.98, top=0.93, bottom=0.09, hspace=0.08)
+    return figure
+
+
+def warp_figure(warp: Warp, inset: np.ndarray | None, caption: str) -> Figure:
+    """The undistorted checkerboard at its native pixel size (Figure 6 style).
+
+    The valid region is outlined in green (the r_max circle); pixels outside
+    it are dimmed, since the model folds there and repeats image content.
+    ``inset`` (the input checkerboard) is shown in the top-left corner.
+    """
+    height, width = warp.image.shape[:2]
+    figure = new_figure(width / 100, height / 100, dpi=100)
+    axes = figure.add_axes((0, 0, 1, 1))
+    image = np.where(warp.valid[..., None], warp.image, (warp.image * 0.55).astype(np.uint8))
+    axes.imshow(image, interpolation="nearest", extent=(-0.5, width - 0.5, height - 0.5, -0.5))
+    if math.isfinite(warp.r_max_pixels) and warp.r_max_pixels > 0:
+        axes.add_patch(Circle(warp.centre, warp.r_max_pixels, fill=False, color=GREEN, linewidth=2))
+    axes.set_xlim(-0.5, width - 0.5)
+    axes.set_ylim(height - 0.5, -0.5)
+    axes.set_axis_off()
+    if inset is not None:
+        box = figure.add_axes((0.01, 0.70, 0.26, 0.28))
+        box.imshow(inset, interpolation="nearest")
+        box.set_xticks([])
+        box.set_yticks([])
+        box.set_title("input", fontsize=7, color="white", pad=2)
+    axes.text(
+        0.5,
+        0.01,
+        caption,
+        transform=axes.transAxes,
+        ha="center",
+        va="bottom",
+        fontsize=8,
+        color="white",
+        bbox={"facecolor": "black", "alpha": 0.6, "edgecolor": "none", "pad": 3},
+    )
+    return figure
+
+
+def map_figure(grid: RMaxMap) -> Figure:
+    """r_max of Brown-Conrady over (k1, k2), one panel per k3 (paper Figure 3).
+
+    Colour is log r_max (red: near 0, blue: large); green: r_max = infinity.
+    """
+    panels = len(grid.k3)
+    columns = min(panels, 4)
+    rows = math.ceil(panels / columns)
+    figure = new_figure(3.0 * columns + 1.2, 3.0 * rows + 0.6, layout="constrained")
+    axes = np.atleast_1d(figure.subplots(rows, columns, squeeze=False)).ravel()
+    norm = LogNorm(vmin=R_MAX_SHOWN[0], vmax=R_MAX_SHOWN[1])
+    cmap = matplotlib.colormaps["RdYlBu"].with_extremes(bad=GREEN)
+    extent = (grid.k1[0], grid.k1[-1], grid.k2[0], grid.k2[-1])
+    image = None
+    for index, k3 in enumerate(grid.k3):
+        values = np.ma.masked_where(
+            ~np.isfinite(grid.r_max[index]), np.clip(grid.r_max[index], *R_MAX_SHOWN)
+        )
+        image = axes[index].imshow(
+            values,
+            origin="lower",
+            extent=extent,
+            cmap=cmap,
+            norm=norm,
+            interpolation="nearest",
+            aspect="auto",
+        )
+        axes[index].set_title(f"k3 = {k3:g}", fontsize=9)
+        axes[index].set_xlabel("k1")
+        if index % columns == 0:
+            axes[index].set_ylabel("k2")
+    for extra in axes[panels:]:
+        extra.set_visible(False)
+    bar = figure.colorbar(image, ax=list(axes[:panels]), fraction=0.04, pad=0.02)
+    bar.set_label("r_max (normalized camera coordinates)\ngreen: \u221e (no fold)")
+    ticks = [t for t in (0.25, 0.5, 1.0, 2.0, 4.0) if R_MAX_SHOWN[0] <= t <= R_MAX_SHOWN[1]]
+    bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+    bar.ax.yaxis.set_minor_formatter(NullFormatter())
+    figure.suptitle("Brown-Conrady maximum valid radius over (k1, k2)", fontsize=10)
+    return figure

@@ -1,0 +1,215 @@
+"""Write a report directory: CSV, JSON, Markdown tables, Figure 5 and report.html.
+
+Existing files are replaced only when asked (``force``); every file is
+written to a temporary name first and renamed, so that an interrupted run
+never leaves a half-written file under a report name.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .. import __version__
+
+if TYPE_CHECKING:
+    from ..pipeline import Audit
+
+#: Files of every report, in the order they are written.
+REPORT_FILES = (
+    "entries.csv",
+    "summary.json",
+    "table1.md",
+    "table1.csv",
+    "table2.md",
+    "table2.csv",
+    "folding.csv",
+    "fig5_r_normalized.csv",
+    "fig5_r_normalized.png",
+    "fig5_r_normalized.svg",
+    "report.html",
+)
+#: Written with ``paper`` values only.
+PAPER_FILE = "paper_comparison.md"
+
+FOLDING_COLUMNS = (
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "focal",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "r_max",
+    "d_max",
+    "r_normalized",
+    "r_normalized_paper",
+)
+
+
+class ReportExistsError(Exception):
+    """The output directory already holds report files (and ``force`` was not given)."""
+
+    def __init__(self, directory: Path, existing: list[str]) -> None:
+        super().__init__(
+            f"{directory} already holds {', '.join(existing)}; use --force to replace them"
+        )
+        self.existing = existing
+
+
+def planned_files(paper: bool = False) -> list[str]:
+    """Names of the files a report writes."""
+    return list(REPORT_FILES) + ([PAPER_FILE] if paper else [])
+
+
+def _json_ready(value: Any) -> Any:
+    if isinstance(value, float):
+        if math.isnan(value):
+            return None
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    return value
+
+
+def folding_rows(audit: Audit) -> list[list[str]]:
+    """``folding.csv`` rows: the entries that fold inside their image, by r_normalized."""
+    from ..pipeline import format_float
+
+    records = audit.records()
+    rows = []
+    for index in audit.summary.folding:
+        record = records[index]
+        rows.append(
+            [
+                format_float(v) if isinstance(v, float) else str(v)
+                for v in (record[c] for c in FOLDING_COLUMNS)
+            ]
+        )
+    return rows
+
+
+def _csv_text(header: tuple[str, ...] | list[str], rows: list[Any]) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return out.getvalue()
+
+
+def _atomic(path: Path, write: Callable[[Path], None]) -> None:
+    temporary = path.with_name(f".{path.name}.tmp")
+    try:
+        write(temporary)
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
+
+
+def _write_text(path: Path, text: str) -> None:
+    _atomic(path, lambda p: p.write_text(text, encoding="utf-8", newline=""))
+
+
+def write_report(
+    audit: Audit,
+    directory: str | os.PathLike[str],
+    force: bool = False,
+    paper_values: dict[str, Any] | None = None,
+) -> list[Path]:
+    """Write the report of ``audit`` into ``directory`` (created if needed).
+
+    Raises :class:`ReportExistsError` when a report file is already there and
+    ``force`` is false; ``OSError`` when the directory cannot be written.
+    With ``paper_values`` (see :func:`lensaudit.report.paper.load_values`)
+    the paper comparison is added. Returns the paths written.
+    """
+    from ..formats import writer
+    from . import figures, histogram, html, provenance, tables
+
+    directory = Path(directory)
+    names = planned_files(paper_values is not None)
+    if directory.exists() and not directory.is_dir():
+        raise NotADirectoryError(f"{directory} exists and is not a directory")
+    existing = [n for n in names if (directory / n).exists()]
+    if existing and not force:
+        raise ReportExistsError(directory, existing)
+    directory.mkdir(parents=True, exist_ok=True)
+
+    summary = audit.summary
+    facts = provenance.collect(audit)
+    table1 = tables.table1_rows(summary)
+    table2 = tables.table2_rows(summary)
+    fig5 = histogram.figure5(audit)
+    comparison = None
+    if paper_values is not None:
+        from . import paper
+
+        comparison = paper.compare(audit, paper_values)
+
+    buffer = io.StringIO()
+    writer("csv")(audit, buffer)
+    texts = {
+        "entries.csv": buffer.getvalue(),
+        "summary.json": json.dumps(
+            _json_ready(
+                {
+                    "lensaudit": __version__,
+                    "provenance": facts.to_dict(),
+                    "summary": summary.to_dict(),
+                    "figure5": {
+                        "population": histogram.POPULATION,
+                        "entries": fig5.entries,
+                        "below_one": fig5.below_one,
+                        "below_one_paper": fig5.below_one_paper,
+                    },
+                    "folding": [
+                        f"{audit.entries[i].file}:{audit.entries[i].line}" for i in summary.folding
+                    ],
+                }
+            ),
+            indent=1,
+            allow_nan=False,
+        )
+        + "\n",
+        "table1.md": tables.to_markdown(tables.TABLE1_HEADER, table1, tables.TABLE1_CAPTION),
+        "table1.csv": tables.to_csv(tables.TABLE1_HEADER, table1),
+        "table2.md": tables.to_markdown(tables.TABLE2_HEADER, table2, tables.TABLE2_CAPTION),
+        "table2.csv": tables.to_csv(tables.TABLE2_HEADER, table2),
+        "folding.csv": _csv_text(FOLDING_COLUMNS, folding_rows(audit)),
+        "fig5_r_normalized.csv": _csv_text(
+            ("bin_low", "bin_high", "count", "count_paper_units"), fig5.rows()
+        ),
+    }
+    written = []
+    for name, text in texts.items():
+        _write_text(directory / name, text)
+        written.append(directory / name)
+
+    figure = figures.figure5(fig5)
+    for suffix in ("png", "svg"):
+        path = directory / f"fig5_r_normalized.{suffix}"
+        _atomic(path, lambda p, s=suffix: figures.save(figure, p, s))
+        written.append(path)
+    page = html.render(
+        audit, facts, fig5, figures.inline_svg(figure, "fig5"), table1, table2, comparison
+    )
+    _write_text(directory / "report.html", page)
+    written.append(directory / "report.html")
+    if comparison is not None:
+        from . import paper
+
+        _write_text(directory / PAPER_FILE, paper.markdown(comparison))
+        written.append(directory / PAPER_FILE)
+    return written

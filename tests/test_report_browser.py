@@ -1,0 +1,158 @@
+"""report.html in a real browser: headless Chromium runs the page's script, offline.
+
+The page is opened from a file:// URL with a view state in its fragment
+(filter, sort); the DOM Chromium dumps after the script ran is what a user
+sees. Skipped where no Chromium is installed (`apt-get install chromium`).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+import shutil
+import subprocess
+from urllib.parse import quote
+
+import pytest
+from lxml import html as lxml_html
+
+from lensaudit.pipeline import run
+from lensaudit.report import write_report
+
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+BROWSER = next((shutil.which(name) for name in BROWSERS if shutil.which(name)), None)
+
+pytestmark = pytest.mark.skipif(
+    BROWSER is None, reason="no Chromium found (install it with `apt-get install chromium`)"
+)
+
+HOSTILE_LENS = "<img src=x onerror=\"document.body.setAttribute('data-pwned','1')\">"
+
+
+def rendered(page, fragment, profile):
+    """The DOM of ``page`` after its script ran, as an lxml tree."""
+    url = page.resolve().as_uri() + ("#" + fragment if fragment else "")
+    result = subprocess.run(
+        [
+            BROWSER,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            "--no-default-browser-check",
+            f"--user-data-dir={profile}",
+            "--virtual-time-budget=5000",
+            "--dump-dom",
+            url,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    return lxml_html.fromstring(result.stdout)
+
+
+def table_rows(dom):
+    header = [th.text_content().strip() for th in dom.xpath('//table[@id="entries"]/thead//th')]
+    return [
+        dict(zip(header, (td.text_content() for td in tr.xpath("./td")), strict=True))
+        for tr in dom.xpath('//table[@id="entries"]/tbody/tr')
+    ]
+
+
+@pytest.fixture(scope="module")
+def bundled(bundled_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bundled")
+    write_report(run(bundled_db), out)
+    with (out / "entries.csv").open(newline="") as stream:
+        entries = list(csv.DictReader(stream))
+    return out / "report.html", entries
+
+
+@pytest.fixture(scope="module")
+def profile(tmp_path_factory):
+    return tmp_path_factory.mktemp("chromium-profile")
+
+
+@pytest.fixture(scope="module")
+def full_view(bundled, profile):
+    """The page as opened, no fragment: every entry shown."""
+    return rendered(bundled[0], "", profile)
+
+
+def test_the_script_builds_the_full_table(bundled, full_view):
+    _, entries = bundled
+    dom = full_view
+    rows = table_rows(dom)
+    assert len(rows) == len(entries)
+    assert dom.xpath('string(//*[@id="entries-count"])') == (
+        f"Showing {len(entries)} of {len(entries)} entries"
+    )
+    assert [r["file:line"] for r in rows[:3]] == [f"{e['file']}:{e['line']}" for e in entries[:3]]
+
+
+def test_a_filter_in_the_url_shows_only_matching_entries(bundled, profile):
+    page, entries = bundled
+    dom = rendered(page, "q=" + quote("tokina 11-16") + "&model=ptlens", profile)
+    expected = [
+        f"{e['file']}:{e['line']}"
+        for e in entries
+        if "tokina" in (e["maker"] + " " + e["lens"]).lower()
+        and "11-16" in e["lens"]
+        and e["model"] == "ptlens"
+    ]
+    assert 3 <= len(expected) < 50
+    assert [r["file:line"] for r in table_rows(dom)] == expected
+    assert dom.xpath('string(//*[@id="entries-count"])').startswith(f"Showing {len(expected)} of")
+    assert dom.xpath('//input[@id="filter-text"]/@value') in ([], ["tokina 11-16"])
+
+
+def test_sorting_by_a_column_orders_the_rows_numerically(bundled, profile):
+    page, entries = bundled
+    dom = rendered(page, "folds=1&sort=r_normalized&dir=desc", profile)
+    folding = [e for e in entries if e["folds_in_image"] == "true"]
+    folding.sort(key=lambda e: float(e["r_normalized"]), reverse=True)
+    rows = table_rows(dom)
+    assert [r["file:line"] for r in rows] == [f"{e['file']}:{e['line']}" for e in folding]
+    values = [float(r["r_normalized"]) for r in rows]
+    assert values == sorted(values, reverse=True) and all(v < 1 for v in values)
+    header = dom.xpath('//table[@id="entries"]//th[@data-key="r_normalized"]')[0]
+    assert header.get("aria-sort") == "descending"
+
+
+def test_infinite_r_max_sorts_after_finite_and_shows_as_infinity(bundled, profile):
+    page, _ = bundled
+    rows = table_rows(rendered(page, "q=tokina&sort=r_max", profile))
+    shown = [r["r_max"] for r in rows]
+    finite = [float(v) for v in shown if v != "\u221e"]
+    assert finite == sorted(finite)
+    assert "\u221e" in shown and shown.index("\u221e") == len(finite)
+
+
+def test_hostile_names_stay_text_in_the_browser(write_xml, tmp_path, profile):
+    name = HOSTILE_LENS.replace("&", "&amp;").replace("<", "&lt;").replace('"', "&quot;")
+    path = write_xml(f"""<lensdatabase version="2"><lens><maker>Evil</maker>
+        <model>{name}</model><mount>M</mount><cropfactor>1</cropfactor><calibration>
+        <distortion model="poly3" focal="10" k1="-0.3"/></calibration></lens></lensdatabase>""")
+    write_report(run(path.parent), tmp_path / "out")
+    dom = rendered(tmp_path / "out" / "report.html", "", profile)
+    assert dom.xpath("//body/@data-pwned") == []
+    assert not dom.xpath("//img")
+    assert table_rows(dom)[0]["lens"] == HOSTILE_LENS
+    assert dom.xpath('//article[@class="fold"]/h3')[0].text_content().startswith(HOSTILE_LENS)
+
+
+def test_the_page_shows_provenance_tables_and_figure(bundled, full_view):
+    _, entries = bundled
+    dom = full_view
+    assert dom.xpath('//dl[@id="provenance"]/dt[.="Content hash (SHA-256)"]')
+    assert re.search(r"Total\s*\d+", dom.xpath('string(//table[@id="table1"])'))
+    assert dom.xpath('//section[@id="figure5"]//svg')
+    assert len(dom.xpath('//article[@class="fold"]')) == sum(
+        e["folds_in_image"] == "true" for e in entries
+    )
