@@ -134,7 +134,7 @@ def sketch_svg(curve: Curve, width: int = 260, height: int = 150) -> str:
     labels = [
         (pad_left - 3, y(curve.r_corner) + 4, "end", "#1f77b4", f"{curve.r_corner:.2f}"),
         (pad_left - 3, y(0) + 4, "end", "#555", "0"),
-        (pad_left + plot_w, height - 6, "end", "#555", f"r = {x_end:.2f}"),
+        (pad_left + plot_w - 3, pad_top + 12, "end", "#555", f"r from 0 to {x_end:.2f}"),
         (pad_left + 3, pad_top + 12, "start", "#222", "D(r)"),
     ]
     if math.isfinite(curve.r_max) and curve.r_max <= x_end:
