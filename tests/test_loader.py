@@ -7,8 +7,8 @@ import xml.etree.ElementTree as StdlibET
 from pathlib import Path
 
 import pytest
-from conftest import lens_xml
 
+from conftest import lens_xml
 from lensaudit import loader
 from lensaudit.loader import LoadError, load, load_bytes
 
@@ -19,56 +19,92 @@ def only(entries):
 
 
 def test_ptlens_entry_has_lens_context_and_coefficients():
-    entry = only(load_bytes(lens_xml(
-        '<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>').encode(),
-        "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(
+                '<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>'
+            ).encode(),
+            "db.xml",
+        )
+    )
     assert (entry.maker, entry.lens, entry.mounts) == ("Test", "Test 10mm", ("Test Mount",))
     assert (entry.model, entry.focal, entry.a, entry.b, entry.c) == (
-        "ptlens", 11.0, -0.024, -0.002, 0.005)
+        "ptlens",
+        11.0,
+        -0.024,
+        -0.002,
+        0.005,
+    )
     assert math.isnan(entry.k1) and math.isnan(entry.real_focal)
     assert entry.status == "ok" and entry.message == ""
 
 
 def test_defaults_type_rectilinear_crop_one_aspect_three_to_two():
-    entry = only(load_bytes(lens_xml('<distortion model="poly3" focal="50" k1="-0.01"/>',
-                                     cropfactor=None).encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml('<distortion model="poly3" focal="50" k1="-0.01"/>', cropfactor=None).encode(),
+            "db.xml",
+        )
+    )
     assert (entry.type, entry.crop_factor, entry.aspect_ratio) == ("rectilinear", 1.0, 1.5)
 
 
 def test_missing_coefficient_is_zero_as_in_liblensfun():
-    entry = only(load_bytes(lens_xml('<distortion model="ptlens" focal="20" b="0.01"/>').encode(),
-                            "db.xml"))
+    entry = only(
+        load_bytes(lens_xml('<distortion model="ptlens" focal="20" b="0.01"/>').encode(), "db.xml")
+    )
     assert (entry.a, entry.b, entry.c) == (0.0, 0.01, 0.0)
     assert entry.status == "ok"
 
 
-@pytest.mark.parametrize(("text", "ratio"), [("4:3", 4 / 3), ("16:9", 16 / 9), ("1.333", 1.333),
-                                              ("3:2", 1.5)])
+@pytest.mark.parametrize(
+    ("text", "ratio"), [("4:3", 4 / 3), ("16:9", 16 / 9), ("1.333", 1.333), ("3:2", 1.5)]
+)
 def test_aspect_ratio_accepts_ratio_and_decimal_forms(text, ratio):
-    entry = only(load_bytes(lens_xml('<distortion model="poly3" focal="5" k1="0.01"/>',
-                                     extra=f"<aspect-ratio>{text}</aspect-ratio>").encode(),
-                            "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(
+                '<distortion model="poly3" focal="5" k1="0.01"/>',
+                extra=f"<aspect-ratio>{text}</aspect-ratio>",
+            ).encode(),
+            "db.xml",
+        )
+    )
     assert entry.aspect_ratio == pytest.approx(ratio, rel=1e-15)
 
 
 def test_calibration_attributes_override_the_lens_crop_and_aspect():
-    entry = only(load_bytes(lens_xml(
-        '<distortion model="poly3" focal="5" k1="0.01"/>', cropfactor="1.5",
-        extra="<aspect-ratio>3:2</aspect-ratio>",
-        calibration=' cropfactor="2" aspect-ratio="4:3"').encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(
+                '<distortion model="poly3" focal="5" k1="0.01"/>',
+                cropfactor="1.5",
+                extra="<aspect-ratio>3:2</aspect-ratio>",
+                calibration=' cropfactor="2" aspect-ratio="4:3"',
+            ).encode(),
+            "db.xml",
+        )
+    )
     assert (entry.crop_factor, entry.aspect_ratio) == (2.0, pytest.approx(4 / 3))
 
 
 def test_type_and_real_focal_are_read():
-    entry = only(load_bytes(lens_xml(
-        '<distortion model="poly5" focal="8" k1="0.1" k2="-0.01" real-focal="7.9"/>',
-        extra="<type>fisheye</type>").encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(
+                '<distortion model="poly5" focal="8" k1="0.1" k2="-0.01" real-focal="7.9"/>',
+                extra="<type>fisheye</type>",
+            ).encode(),
+            "db.xml",
+        )
+    )
     assert (entry.type, entry.real_focal, entry.k1, entry.k2) == ("fisheye", 7.9, 0.1, -0.01)
 
 
 def test_unknown_model_is_kept_with_a_status():
-    entry = only(load_bytes(lens_xml('<distortion model="acm" focal="8" k1="0.1"/>').encode(),
-                            "db.xml"))
+    entry = only(
+        load_bytes(lens_xml('<distortion model="acm" focal="8" k1="0.1"/>').encode(), "db.xml")
+    )
     assert entry.status == "unknown_model"
     assert "'acm'" in entry.message
 
@@ -85,30 +121,44 @@ def test_missing_model_is_kept_with_a_status():
 
 @pytest.mark.parametrize("value", ["abc", "0.1.2", "1_0", "", "0x10"])
 def test_non_numeric_coefficient_is_a_bad_value(value):
-    entry = only(load_bytes(lens_xml(
-        f'<distortion model="ptlens" focal="8" a="{value}"/>').encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(f'<distortion model="ptlens" focal="8" a="{value}"/>').encode(), "db.xml"
+        )
+    )
     assert entry.status == "bad_value"
     assert entry.message.startswith("a=")
 
 
 @pytest.mark.parametrize("value", ["nan", "NaN", "inf", "-Infinity", "1e999"])
 def test_non_finite_coefficient_is_a_bad_value(value):
-    entry = only(load_bytes(lens_xml(
-        f'<distortion model="poly3" focal="8" k1="{value}"/>').encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(f'<distortion model="poly3" focal="8" k1="{value}"/>').encode(), "db.xml"
+        )
+    )
     assert entry.status == "bad_value"
     assert "finite" in entry.message or "overflows" in entry.message
 
 
 @pytest.mark.parametrize(("attribute", "value"), [("focal", "0"), ("focal", "-5")])
 def test_non_positive_focal_is_a_bad_value(attribute, value):
-    entry = only(load_bytes(lens_xml(
-        f'<distortion model="poly3" {attribute}="{value}" k1="0.1"/>').encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(f'<distortion model="poly3" {attribute}="{value}" k1="0.1"/>').encode(),
+            "db.xml",
+        )
+    )
     assert entry.status == "bad_value" and "not positive" in entry.message
 
 
 def test_non_positive_crop_factor_makes_its_entries_bad_values():
-    entry = only(load_bytes(lens_xml('<distortion model="poly3" focal="8" k1="0.1"/>',
-                                     cropfactor="0").encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml('<distortion model="poly3" focal="8" k1="0.1"/>', cropfactor="0").encode(),
+            "db.xml",
+        )
+    )
     assert entry.status == "bad_value" and "crop factor" in entry.message
 
 
@@ -119,25 +169,34 @@ def test_distortion_outside_a_lens_is_reported_not_dropped():
 
 
 def test_line_numbers_are_source_lines_even_past_removed_calibrations():
-    lines = ['<lensdatabase>', '<lens><maker>M</maker><model>L</model><calibration>']
-    lines += ['<vignetting model="pa" focal="1" aperture="2" distance="3" k1="0" k2="0" k3="0"/>',
-              '<tca model="linear" focal="1" kr="1" kb="1"/>',
-              '<vignetting model="pa"\n  focal="1" aperture="2" distance="3" k1="0"/>']
-    lines += ['<distortion model="poly3" focal="8" k1="0.1"/>', '</calibration></lens>',
-              '</lensdatabase>']
+    lines = ["<lensdatabase>", "<lens><maker>M</maker><model>L</model><calibration>"]
+    lines += [
+        '<vignetting model="pa" focal="1" aperture="2" distance="3" k1="0" k2="0" k3="0"/>',
+        '<tca model="linear" focal="1" kr="1" kb="1"/>',
+        '<vignetting model="pa"\n  focal="1" aperture="2" distance="3" k1="0"/>',
+    ]
+    lines += [
+        '<distortion model="poly3" focal="8" k1="0.1"/>',
+        "</calibration></lens>",
+        "</lensdatabase>",
+    ]
     entry = only(load_bytes("\n".join(lines).encode(), "db.xml"))
     assert entry.line == 7
 
 
 def test_commented_out_distortion_is_not_an_entry():
-    xml = lens_xml('<!-- <distortion model="poly3" focal="8" k1="0.1"/> -->',
-                   '<distortion model="poly3" focal="9" k1="0.1"/>')
+    xml = lens_xml(
+        '<!-- <distortion model="poly3" focal="8" k1="0.1"/> -->',
+        '<distortion model="poly3" focal="9" k1="0.1"/>',
+    )
     assert only(load_bytes(xml.encode(), "db.xml")).focal == 9.0
 
 
 def test_broken_xml_reports_line_and_column_and_salvages_entries():
-    xml = lens_xml('<distortion model="poly3" focal="8" k1="0.1"/>',
-                   '<distortion model="poly3" focal="9" k1="0.2">')  # never closed
+    xml = lens_xml(
+        '<distortion model="poly3" focal="8" k1="0.1"/>',
+        '<distortion model="poly3" focal="9" k1="0.2">',
+    )  # never closed
     entries = load_bytes(xml.encode(), "db.xml")
     head, *salvaged = entries
     assert head.status == "xml_error"
@@ -147,17 +206,23 @@ def test_broken_xml_reports_line_and_column_and_salvages_entries():
 
 
 def test_malformed_vignetting_is_still_a_parse_error():
-    xml = lens_xml('<vignetting model="pa" focal=1/>',
-                   '<distortion model="poly3" focal="8" k1="0.1"/>')
+    xml = lens_xml(
+        '<vignetting model="pa" focal=1/>', '<distortion model="poly3" focal="8" k1="0.1"/>'
+    )
     head = load_bytes(xml.encode(), "db.xml")[0]
     assert head.status == "xml_error" and head.line == 10  # the first calibration line
 
 
-@pytest.mark.parametrize(("content", "fragment"), [
-    (b"", "line 1"),
-    ("<lensdatabase><lens><maker>Caf\u00e9</maker></lens></lensdatabase>".encode("latin-1"),
-     "encoding"),
-])
+@pytest.mark.parametrize(
+    ("content", "fragment"),
+    [
+        (b"", "line 1"),
+        (
+            "<lensdatabase><lens><maker>Caf\u00e9</maker></lens></lensdatabase>".encode("latin-1"),
+            "encoding",
+        ),
+    ],
+)
 def test_empty_and_non_utf8_files_are_xml_errors(content, fragment):
     head = only(load_bytes(content, "db.xml"))
     assert head.status == "xml_error" and fragment in head.message
@@ -166,9 +231,12 @@ def test_empty_and_non_utf8_files_are_xml_errors(content, fragment):
 def test_external_entity_is_not_fetched(tmp_path):
     secret = tmp_path / "secret.txt"
     secret.write_text("TOPSECRET")
-    xml = (f'<?xml version="1.0"?>\n<!DOCTYPE d [<!ENTITY x SYSTEM "file://{secret}">]>\n'
-           + lens_xml('<distortion model="poly3" focal="8" k1="0.1"/>').replace(
-               "<maker>Test</maker>", "<maker>&x;</maker>"))
+    xml = (
+        f'<?xml version="1.0"?>\n<!DOCTYPE d [<!ENTITY x SYSTEM "file://{secret}">]>\n'
+        + lens_xml('<distortion model="poly3" focal="8" k1="0.1"/>').replace(
+            "<maker>Test</maker>", "<maker>&x;</maker>"
+        )
+    )
     entries = load_bytes(xml.encode(), "db.xml")
     assert "TOPSECRET" not in repr(entries)
 
@@ -176,10 +244,11 @@ def test_external_entity_is_not_fetched(tmp_path):
 def test_entity_expansion_bomb_is_not_expanded():
     entities = '<!ENTITY a0 "lol">' + "".join(
         f'<!ENTITY a{i} "{"&a" + str(i - 1) + ";" * 1}{"&a" + str(i - 1) + ";"}">'
-        for i in range(1, 40))
-    xml = (f'<!DOCTYPE d [{entities}]>\n' + lens_xml(
-        '<distortion model="poly3" focal="8" k1="0.1"/>').replace(
-            "<maker>Test</maker>", "<maker>&a39;</maker>"))
+        for i in range(1, 40)
+    )
+    xml = f"<!DOCTYPE d [{entities}]>\n" + lens_xml(
+        '<distortion model="poly3" focal="8" k1="0.1"/>'
+    ).replace("<maker>Test</maker>", "<maker>&a39;</maker>")
     entries = load_bytes(xml.encode(), "db.xml")
     assert len(repr(entries)) < 10_000
 
@@ -227,7 +296,8 @@ def test_bundled_database_matches_liblensfun(bundled_db: Path):
     for e in load(bundled_db).entries:
         coefficients = {"ptlens": (e.a, e.b, e.c), "poly3": (e.k1,), "poly5": (e.k1, e.k2)}
         ours.setdefault((e.maker, e.lens, single(e.crop_factor)), {}).setdefault(
-            single(e.focal), set()).add((e.model, single(*coefficients[e.model])))
+            single(e.focal), set()
+        ).add((e.model, single(*coefficients[e.model])))
     theirs: dict = {}
     lenses = lensfunpy.Database().lenses
     names = {(lens.maker.strip(), lens.model.strip()) for lens in lenses}
@@ -251,3 +321,28 @@ def test_parse_number_rejects_python_only_spellings():
     for text in ("nan", "inf", "1_000", "\u0661", "1e400"):
         with pytest.raises(ValueError):
             loader.parse_number(text)
+
+
+def test_real_focal_length_element_of_version_1_databases_is_read():
+    xml = lens_xml(
+        '<distortion model="ptlens" focal="4.9" a="0.0132" b="-0.07765" c="0.14683"/>',
+        '<distortion model="ptlens" focal="6" a="0.01" b="-0.07" c="0.1"/>',
+        '<real-focal-length focal="4.9" real-focal="3.2"/>',
+    )
+    first, second = load_bytes(xml.encode(), "db.xml")
+    assert first.real_focal == 3.2 and first.status == "ok"
+    assert math.isnan(second.real_focal)
+
+
+def test_real_focal_attribute_wins_over_the_element():
+    xml = lens_xml(
+        '<distortion model="poly3" focal="5" k1="0.01" real-focal="4.5"/>',
+        '<real-focal-length focal="5" real-focal="3.2"/>',
+    )
+    assert only(load_bytes(xml.encode(), "db.xml")).real_focal == 4.5
+
+
+def test_long_bad_values_are_cut_short_in_messages():
+    entry = only(load_bytes(lens_xml(
+        f'<distortion model="poly3" focal="8" k1="{"9" * 5000}"/>').encode(), "db.xml"))
+    assert entry.status == "bad_value" and len(entry.message) < 200

@@ -15,12 +15,13 @@ from __future__ import annotations
 import math
 import os
 import re
-import sys
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
-from lxml import etree
+if TYPE_CHECKING:
+    from lxml import etree
 
 #: Distortion models lensaudit knows how to audit, and the coefficient
 #: attributes each one reads (a missing coefficient means 0, as in liblensfun).
@@ -120,10 +121,18 @@ def parse_number(text: str | None) -> float:
     if value is not None and value - value == 0 and text.isascii() and "_" not in text:
         return value
     if _DECIMAL.match(text):
-        raise ValueError(f"{text.strip()!r} overflows a double")
+        raise ValueError(f"{_quoted(text)} overflows a double")
     if _NON_FINITE.match(text):
-        raise ValueError(f"{text.strip()!r} is not a finite number")
-    raise ValueError(f"{text.strip()[:40]!r} is not a number")
+        raise ValueError(f"{_quoted(text)} is not a finite number")
+    raise ValueError(f"{_quoted(text)} is not a number")
+
+
+def _quoted(text: str, limit: int = 40) -> str:
+    """A value for a message: stripped, quoted, and cut short if long."""
+    text = text.strip()
+    if len(text) > limit:
+        return repr(text[:limit]) + f"... ({len(text)} characters)"
+    return repr(text)
 
 
 def parse_aspect_ratio(text: str) -> float:
@@ -140,6 +149,8 @@ def parse_aspect_ratio(text: str) -> float:
 
 def make_parser() -> etree.XMLParser:
     """An lxml parser that never touches the network, DTDs or entities."""
+    from lxml import etree
+
     return etree.XMLParser(
         resolve_entities=False,
         no_network=True,
@@ -148,24 +159,6 @@ def make_parser() -> etree.XMLParser:
         huge_tree=False,
         remove_pis=True,
     )
-
-
-# Vignetting and TCA calibrations make up most of a Lensfun file and are never
-# read here. Removing each one that is a well-formed empty element on a single
-# line (plain quoted attribute values, no entity references) before parsing
-# spares libxml2 thousands of tree nodes, about half the load time. Line numbers
-# are unchanged, and removing a well-formed element leaves the rest as
-# well-formed as it was; anything of another shape is left for libxml2 to
-# judge. When a file does not parse, the original bytes are parsed again so
-# that the reported column is exact.
-_ATTRIBUTES = rb"(?:[ \t]++[A-Za-z_][-\w.]*+[ \t]*+=[ \t]*+(?:\"[^\"<&\n]*+\"|'[^'<&\n]*+'))*+"
-if sys.version_info < (3, 11):  # possessive quantifiers are a speed-up only
-    _ATTRIBUTES = _ATTRIBUTES.replace(b"++", b"+").replace(b"*+", b"*")
-_UNUSED_ELEMENT = re.compile(rb"<(?:vignetting|tca)" + _ATTRIBUTES + rb"[ \t]*/>")
-
-
-def _without_unused(data: bytes) -> bytes:
-    return _UNUSED_ELEMENT.sub(b"", data)
 
 
 def _child_text(element: etree._Element, tag: str) -> str | None:
@@ -191,12 +184,22 @@ class _LensContext:
     aspect_ratio: float
     problem: str = ""  # why entries of this lens cannot be audited
     status: str = STATUS_BAD_VALUE  # the status that problem gives
+    # focal -> real focal, from <real-focal-length> elements of the calibration
+    real_focals: dict[float, float] = field(default_factory=dict)
 
 
 def _lens_context(lens: etree._Element | None) -> _LensContext:
     if lens is None:
-        return _LensContext("", "", (), DEFAULT_LENS_TYPE, DEFAULT_CROP_FACTOR,
-                            DEFAULT_ASPECT_RATIO, "not inside a <lens> element", STATUS_NO_LENS)
+        return _LensContext(
+            "",
+            "",
+            (),
+            DEFAULT_LENS_TYPE,
+            DEFAULT_CROP_FACTOR,
+            DEFAULT_ASPECT_RATIO,
+            "not inside a <lens> element",
+            STATUS_NO_LENS,
+        )
     problems = []
     maker = _child_text(lens, "maker") or ""
     model = _child_text(lens, "model") or ""
@@ -218,8 +221,9 @@ def _lens_context(lens: etree._Element | None) -> _LensContext:
         except ValueError as error:
             problems.append(f"<aspect-ratio> {error}")
             aspect_ratio = NAN
-    return _LensContext(maker, model, mounts, lens_type, crop_factor, aspect_ratio,
-                        "; ".join(problems))
+    return _LensContext(
+        maker, model, mounts, lens_type, crop_factor, aspect_ratio, "; ".join(problems)
+    )
 
 
 def _positive(value: float, what: str) -> float:
@@ -228,16 +232,26 @@ def _positive(value: float, what: str) -> float:
     return value
 
 
-def _calibration_context(calibration: etree._Element | None,
-                         lens: _LensContext) -> _LensContext:
-    """Apply ``cropfactor=`` / ``aspect-ratio=`` attributes of ``<calibration>``."""
+def _calibration_context(calibration: etree._Element | None, lens: _LensContext) -> _LensContext:
+    """Apply what ``<calibration>`` adds to the lens: ``cropfactor=`` and
+    ``aspect-ratio=`` attributes, and ``<real-focal-length>`` elements (the
+    form version 1 databases give the real focal length in)."""
     if calibration is None or calibration.tag != "calibration":
         return lens
     crop_text = calibration.get("cropfactor")
     aspect_text = calibration.get("aspect-ratio")
-    if crop_text is None and aspect_text is None:
-        return lens
+    real_focals = {}
     problems = [lens.problem] if lens.problem else []
+    for element in calibration.iterchildren("real-focal-length"):
+        try:
+            focal = parse_number(element.get("focal"))
+            real_focals[focal] = _positive(parse_number(element.get("real-focal")), "real focal")
+        except ValueError as error:
+            problems.append(f"<real-focal-length> on line {element.sourceline}: {error}")
+    if crop_text is None and aspect_text is None and not real_focals and len(problems) == bool(
+        lens.problem
+    ):
+        return lens
     crop_factor, aspect_ratio = lens.crop_factor, lens.aspect_ratio
     if crop_text is not None:
         try:
@@ -249,17 +263,31 @@ def _calibration_context(calibration: etree._Element | None,
             aspect_ratio = parse_aspect_ratio(aspect_text)
         except ValueError as error:
             problems.append(f"<calibration aspect-ratio> {error}")
-    return _LensContext(lens.maker, lens.lens, lens.mounts, lens.type, crop_factor,
-                        aspect_ratio, "; ".join(problems), lens.status)
+    return _LensContext(
+        lens.maker,
+        lens.lens,
+        lens.mounts,
+        lens.type,
+        crop_factor,
+        aspect_ratio,
+        "; ".join(problems),
+        lens.status,
+        real_focals,
+    )
 
 
 # When an entry has several problems, the status names the most basic one.
-_STATUS_PRIORITY = (STATUS_NO_LENS, STATUS_MISSING_ATTRIBUTE, STATUS_UNKNOWN_MODEL,
-                    STATUS_BAD_VALUE)
+_STATUS_PRIORITY = (
+    STATUS_NO_LENS,
+    STATUS_MISSING_ATTRIBUTE,
+    STATUS_UNKNOWN_MODEL,
+    STATUS_BAD_VALUE,
+)
 
 
-def _number(attributes, attribute: str, default: float | None,
-            problems: list[tuple[str, str]]) -> float:
+def _number(
+    attributes, attribute: str, default: float | None, problems: list[tuple[str, str]]
+) -> float:
     """Attribute value as a number; a problem is noted for a bad or missing one."""
     text = attributes.get(attribute)
     if text is None:
@@ -275,26 +303,86 @@ def _number(attributes, attribute: str, default: float | None,
     return value
 
 
+def _plain_number(text: str) -> float:
+    """float(text) for a plain finite ASCII number, else ValueError (see parse_number)."""
+    value = float(text)
+    if value - value != 0 or not text.isascii() or "_" in text:
+        raise ValueError(text)
+    return value
+
+
+# Positions of a, b, c, k1, k2 filled by each model's coefficients.
+_COEFFICIENT_SLOTS = {
+    model: tuple(("a", "b", "c", "k1", "k2").index(n) for n in names)
+    for model, names in MODEL_COEFFICIENTS.items()
+}
+
+
 def _entry(element: etree._Element, name: str, context: _LensContext) -> DistortionEntry:
-    """Build the record of one ``<distortion>`` element."""
+    """Build the record of one ``<distortion>`` element.
+
+    The common case, a known model with plain numbers, takes a short path;
+    anything else is examined in full by :func:`_checked_entry`.
+    """
+    get = element.get
+    model = get("model")
+    names = MODEL_COEFFICIENTS.get(model)  # type: ignore[arg-type]
+    focal_text = get("focal")
+    if names is not None and focal_text is not None and not context.problem:
+        try:
+            focal = _plain_number(focal_text)
+            real_text = get("real-focal")
+            if real_text is None:
+                real_focal = context.real_focals.get(focal, NAN)
+            else:
+                real_focal = _plain_number(real_text)
+            coefficients = [NAN] * 5
+            for slot, attribute in zip(_COEFFICIENT_SLOTS[model], names, strict=True):  # type: ignore[index]
+                text = get(attribute)
+                coefficients[slot] = 0.0 if text is None else _plain_number(text)
+        except ValueError:
+            pass
+        else:
+            if focal > 0 and not real_focal <= 0:
+                return DistortionEntry(
+                    name,
+                    element.sourceline or 0,
+                    context.maker,
+                    context.lens,
+                    context.mounts,
+                    context.type,
+                    context.crop_factor,
+                    context.aspect_ratio,
+                    model,
+                    focal,
+                    real_focal,  # type: ignore[arg-type]
+                    *coefficients,
+                )
+    return _checked_entry(element, name, context)
+
+
+def _checked_entry(element: etree._Element, name: str, context: _LensContext) -> DistortionEntry:
+    """The record of one ``<distortion>`` element, every problem noted."""
     attributes = element.attrib
     problems: list[tuple[str, str]] = []
     model = (attributes.get("model") or "").strip()
     if not model:
         problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
     focal = _number(attributes, "focal", None, problems)
-    real_focal = _number(attributes, "real-focal", NAN, problems)
+    real_focal = _number(attributes, "real-focal", context.real_focals.get(focal, NAN), problems)
     for attribute, value in (("focal", focal), ("real-focal", real_focal)):
         if value <= 0:
             problems.append((STATUS_BAD_VALUE, f"{attribute}={value:g} is not positive"))
     coefficients = {}
     names = MODEL_COEFFICIENTS.get(model)
     if names is not None:
-        coefficients = {attribute: _number(attributes, attribute, 0.0, problems)
-                        for attribute in names}
+        coefficients = {
+            attribute: _number(attributes, attribute, 0.0, problems) for attribute in names
+        }
     elif model:
-        problems.append((STATUS_UNKNOWN_MODEL,
-                         f"model {model!r} is not one of ptlens, poly3, poly5"))
+        problems.append(
+            (STATUS_UNKNOWN_MODEL, f"model {_quoted(model)} is not one of ptlens, poly3, poly5")
+        )
     if context.problem:
         problems.append((context.status, context.problem))
     status, message = STATUS_OK, ""
@@ -339,8 +427,11 @@ def entries_from_tree(root: etree._Element, name: str) -> Iterator[DistortionEnt
 
 def _salvage(data: bytes, name: str, reason: str) -> list[DistortionEntry]:
     """Entries libxml2 can still recover from a broken file, marked as such."""
-    parser = etree.XMLParser(recover=True, resolve_entities=False, no_network=True,
-                             load_dtd=False, huge_tree=False)
+    from lxml import etree
+
+    parser = etree.XMLParser(
+        recover=True, resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+    )
     try:
         root = etree.fromstring(data, parser)
     except etree.XMLSyntaxError:
@@ -362,9 +453,18 @@ def _replace_status(entry: DistortionEntry, status: str, message: str) -> Distor
 
 def _error_entry(name: str, line: int, status: str, message: str) -> DistortionEntry:
     return DistortionEntry(
-        file=name, line=line, maker="", lens="", mounts=(), type="",
-        crop_factor=NAN, aspect_ratio=NAN, model="", focal=NAN,
-        status=status, message=message,
+        file=name,
+        line=line,
+        maker="",
+        lens="",
+        mounts=(),
+        type="",
+        crop_factor=NAN,
+        aspect_ratio=NAN,
+        model="",
+        focal=NAN,
+        status=status,
+        message=message,
     )
 
 
@@ -383,20 +483,24 @@ def read_bytes(data: bytes, name: str) -> tuple[list[DistortionEntry], str]:
     error's line (with libxml2's message and column), followed by any entries
     libxml2's recovery mode can still read, each also marked ``xml_error``.
     """
+    from lxml import etree  # imported here: a fully cached load never needs it
+
     try:
-        root = etree.fromstring(_without_unused(data), make_parser())
-    except etree.XMLSyntaxError as first_error:
-        try:
-            etree.fromstring(data, make_parser())
-            error = first_error  # unreachable in practice: both parses agree
-        except etree.XMLSyntaxError as exact_error:
-            error = exact_error
-        line, column, text = _syntax_error_position(error)
-        reason = f"line {line}, column {column}: {text}"
-        message = f"XML is not well-formed at {reason}"
-        head = _error_entry(name, line, STATUS_XML_ERROR, message)
-        return [head, *_salvage(data, name, reason)], message
+        root = etree.fromstring(data, make_parser())
+    except etree.XMLSyntaxError as error:
+        return _unparsable(data, name, error)
     return list(entries_from_tree(root, name)), ""
+
+
+def _unparsable(
+    data: bytes, name: str, error: etree.XMLSyntaxError
+) -> tuple[list[DistortionEntry], str]:
+    """The records of a file that is not well-formed: its error, then what is salvaged."""
+    line, column, text = _syntax_error_position(error)
+    reason = f"line {line}, column {column}: {text}"
+    message = f"XML is not well-formed at {reason}"
+    head = _error_entry(name, line, STATUS_XML_ERROR, message)
+    return [head, *_salvage(data, name, reason)], message
 
 
 def _syntax_error_position(error: etree.XMLSyntaxError) -> tuple[int, int, str]:
@@ -418,12 +522,26 @@ def _display_name(file: Path, given: Path) -> str:
     return os.path.relpath(file, given) if given.is_dir() else str(given)
 
 
-def load(paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str]) -> LoadResult:
-    """Load Lensfun XML from database directories and/or XML files.
+class EntryCache(Protocol):
+    """Where :func:`load_files` may find files parsed before (see lensaudit.cache)."""
 
-    Directory entries are reported by their name relative to the directory
-    given; files given directly keep the path as given. Raises
-    :class:`LoadError` when a path does not exist or a directory holds no XML.
+    def get(
+        self, path: Path, stat: os.stat_result, name: str
+    ) -> tuple[list[DistortionEntry], str] | None: ...
+
+    def put(
+        self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
+    ) -> None: ...
+
+
+def expand(
+    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str],
+) -> list[tuple[Path, str]]:
+    """(file, display name) for every XML file the paths designate.
+
+    Directory entries are named relative to the directory given; files given
+    directly keep the path as given. Raises :class:`LoadError` when a path
+    does not exist or a directory holds no XML.
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
@@ -438,20 +556,38 @@ def load(paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str]) -> Lo
             targets.append((given, str(given)))
         else:
             raise LoadError(f"{given}: no such file or directory")
-    return load_files(targets)
+    return targets
 
 
-def load_files(targets: Iterable[tuple[Path, str]]) -> LoadResult:
+def load(
+    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str],
+    cache: EntryCache | None = None,
+) -> LoadResult:
+    """Load Lensfun XML from database directories and/or XML files.
+
+    See :func:`expand` for how files are found and named; ``cache``, if
+    given, supplies files parsed before and is given the ones parsed now.
+    """
+    return load_files(expand(paths), cache)
+
+
+def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = None) -> LoadResult:
     """Load (path, display name) pairs; unreadable files become records."""
     result = LoadResult()
     for path, name in targets:
+        path = path.resolve()
         try:
-            data = path.read_bytes()
+            stat = path.stat()
+            cached = cache.get(path, stat, name) if cache is not None else None
+            if cached is not None:
+                entries, error = cached
+            else:
+                entries, error = read_bytes(path.read_bytes(), name)
+                if cache is not None:
+                    cache.put(path, stat, entries, error)
         except OSError as os_error:
             error = f"cannot read file: {os_error.strerror or os_error}"
             entries = [_error_entry(name, 0, STATUS_UNREADABLE, error)]
-        else:
-            entries, error = read_bytes(data, name)
-        result.files.append(SourceFile(name, path.resolve(), len(entries), error))
+        result.files.append(SourceFile(name, path, len(entries), error))
         result.entries.extend(entries)
     return result

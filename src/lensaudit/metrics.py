@@ -64,8 +64,9 @@ def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArra
     """(r_max, d_max, tail sign) for a normalized model."""
     r_max = cubic_r_max(cubic)
     finite = np.isfinite(r_max)
-    d_max = np.where(finite, normalizer.evaluate(cubic.distortion, np.where(finite, r_max, 0)),
-                     r_max)
+    d_max = np.where(
+        finite, normalizer.evaluate(cubic.distortion, np.where(finite, r_max, 0)), r_max
+    )
     tail = np.where(finite, normalizer.leading_sign(cubic.distortion), 0).astype(np.int8)
     return r_max, d_max, tail
 
@@ -83,13 +84,22 @@ def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
 
 def paper_image_corner(crop_factor: ArrayLike, focal: ArrayLike) -> FloatArray:
     """The paper's Eq. 29: hypot(18, 12) / (crop * focal), in focal-length units."""
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return HALF_DIAGONAL_MM / (np.asarray(crop_factor, np.float64) * np.asarray(focal))
 
 
-def compute(model: NDArray[np.str_] | list[str], a: ArrayLike, b: ArrayLike, c: ArrayLike,
-            k1: ArrayLike, k2: ArrayLike, crop_factor: ArrayLike, aspect_ratio: ArrayLike,
-            focal: ArrayLike, audited: ArrayLike) -> Metrics:
+def compute(
+    model: NDArray[np.str_] | list[str],
+    a: ArrayLike,
+    b: ArrayLike,
+    c: ArrayLike,
+    k1: ArrayLike,
+    k2: ArrayLike,
+    crop_factor: ArrayLike,
+    aspect_ratio: ArrayLike,
+    focal: ArrayLike,
+    audited: ArrayLike,
+) -> Metrics:
     """Metrics for entries given as columns; only ``audited`` entries are computed.
 
     ``model`` is "ptlens", "poly3" or "poly5" per entry; coefficients a, b, c
@@ -101,8 +111,10 @@ def compute(model: NDArray[np.str_] | list[str], a: ArrayLike, b: ArrayLike, c: 
     r_max = np.full(size, np.nan)
     d_max = np.full(size, np.nan)
     tail = np.zeros(size, dtype=np.int8)
-    columns = {name: np.asarray(values, dtype=np.float64)
-               for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()}
+    columns = {
+        name: np.asarray(values, dtype=np.float64)
+        for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()
+    }
     builders = {
         "ptlens": lambda rows: normalizer.ptlens(*(columns[n][rows] for n in "abc")),
         "poly3": lambda rows: normalizer.poly3(columns["k1"][rows]),
@@ -114,9 +126,10 @@ def compute(model: NDArray[np.str_] | list[str], a: ArrayLike, b: ArrayLike, c: 
             r_max[rows], d_max[rows], tail[rows] = model_r_max(build(rows))
     r_corner = np.where(audited, image_corner(aspect_ratio), np.nan)
     r_corner_paper = np.where(audited, paper_image_corner(crop_factor, focal), np.nan)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         r_normalized = d_max / r_corner
         r_normalized_paper = d_max / r_corner_paper
     folds = audited & np.isfinite(r_max) & (r_normalized < 1)
-    return Metrics(r_max, d_max, tail, r_corner, r_normalized, r_corner_paper,
-                   r_normalized_paper, folds)
+    return Metrics(
+        r_max, d_max, tail, r_corner, r_normalized, r_corner_paper, r_normalized_paper, folds
+    )

@@ -6,11 +6,11 @@ and :func:`lensaudit.audit` (a pandas DataFrame) are made from.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from operator import attrgetter
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,19 +25,71 @@ if TYPE_CHECKING:
 
 #: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
 COLUMNS = (
-    "file", "line", "maker", "lens", "type", "crop_factor", "aspect_ratio", "model",
-    "focal", "real_focal", "a", "b", "c", "k1", "k2", "r_max", "d_max", "tail",
-    "r_corner", "r_normalized", "r_corner_paper", "r_normalized_paper",
-    "folds_in_image", "status", "message",
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "focal",
+    "real_focal",
+    "a",
+    "b",
+    "c",
+    "k1",
+    "k2",
+    "r_max",
+    "d_max",
+    "tail",
+    "r_corner",
+    "r_normalized",
+    "r_corner_paper",
+    "r_normalized_paper",
+    "folds_in_image",
+    "status",
+    "message",
 )
 
-ENTRY_COLUMNS = ("file", "line", "maker", "lens", "type", "crop_factor", "aspect_ratio",
-                 "model", "focal", "real_focal", "a", "b", "c", "k1", "k2", "status",
-                 "message")
-FLOAT_COLUMNS = frozenset({
-    "crop_factor", "aspect_ratio", "focal", "real_focal", "a", "b", "c", "k1", "k2",
-    "r_max", "d_max", "r_corner", "r_normalized", "r_corner_paper", "r_normalized_paper",
-})
+ENTRY_COLUMNS = (
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "focal",
+    "real_focal",
+    "a",
+    "b",
+    "c",
+    "k1",
+    "k2",
+    "status",
+    "message",
+)
+FLOAT_COLUMNS = frozenset(
+    {
+        "crop_factor",
+        "aspect_ratio",
+        "focal",
+        "real_focal",
+        "a",
+        "b",
+        "c",
+        "k1",
+        "k2",
+        "r_max",
+        "d_max",
+        "r_corner",
+        "r_normalized",
+        "r_corner_paper",
+        "r_normalized_paper",
+    }
+)
 
 _TAIL_NAMES = {1: metrics.TAIL_POSITIVE, -1: metrics.TAIL_NEGATIVE, 0: ""}
 
@@ -57,8 +109,7 @@ class Audit:
     @cached_property
     def audited(self) -> np.ndarray:
         """Boolean mask of entries with status ``ok``."""
-        return np.fromiter((e.status == STATUS_OK for e in self.entries), bool,
-                           len(self.entries))
+        return np.array(list(map(attrgetter("status"), self.entries)), dtype=object) == STATUS_OK
 
     def column(self, name: str) -> list[Any]:
         """One output column as a Python list (floats NaN where empty).
@@ -67,13 +118,16 @@ class Audit:
         or None for entries that were not audited.
         """
         if name in ENTRY_COLUMNS:
-            return [getattr(entry, name) for entry in self.entries]
+            return list(map(attrgetter(name), self.entries))
         if name == "tail":
             return [_TAIL_NAMES[t] for t in self.metrics.tail.tolist()]
         if name == "folds_in_image":
-            return [bool(f) if ok else None
-                    for f, ok in zip(self.metrics.folds_in_image.tolist(),
-                                     self.audited.tolist(), strict=True)]
+            return [
+                bool(f) if ok else None
+                for f, ok in zip(
+                    self.metrics.folds_in_image.tolist(), self.audited.tolist(), strict=True
+                )
+            ]
         return getattr(self.metrics, name).tolist()
 
     def columns(self) -> dict[str, list[Any]]:
@@ -83,8 +137,7 @@ class Audit:
     def records(self) -> list[dict[str, Any]]:
         """One dict per entry, keys in :data:`COLUMNS` order."""
         columns = self.columns()
-        return [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(),
-                                                                     strict=True)]
+        return [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)]
 
     @cached_property
     def summary(self) -> Summary:
@@ -102,33 +155,55 @@ class Audit:
         return frame
 
 
-def run(paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None
-        ) -> Audit:
+def run(
+    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None,
+    *,
+    cache: bool = False,
+) -> Audit:
     """Audit a Lensfun database: directories and/or XML files, or the bundled one.
 
-    Raises :class:`lensaudit.loader.LoadError` when the paths cannot be read
-    at all; problems inside files become entries with a status instead.
+    With ``cache``, files parsed by an earlier run and unchanged since are
+    read from lensaudit's parse cache (see :mod:`lensaudit.cache`). Raises
+    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all;
+    problems inside files become entries with a status instead.
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     source = database.resolve(list(paths) if paths else None)
-    loaded = loader.load(source.paths)
+    targets = loader.expand(source.paths)
+    parse_cache = None
+    if cache:
+        from .cache import ParseCache
+
+        parse_cache = ParseCache([path for path, _ in targets])
+    loaded = loader.load_files(targets, parse_cache)
+    if parse_cache is not None:
+        parse_cache.save()
     return audit_entries(loaded.entries, source, loaded.files)
 
 
-def audit_entries(entries: list[DistortionEntry],
-                  source: database.DatabaseSource | None = None,
-                  files: list[SourceFile] | None = None) -> Audit:
+def audit_entries(
+    entries: list[DistortionEntry],
+    source: database.DatabaseSource | None = None,
+    files: list[SourceFile] | None = None,
+) -> Audit:
     """Compute the metrics of already loaded entries."""
     size = len(entries)
 
     def floats(name: str) -> np.ndarray:
-        return np.fromiter((getattr(e, name) for e in entries), np.float64, size)
+        return np.fromiter(map(attrgetter(name), entries), np.float64, size)
 
-    audited = np.fromiter((e.status == STATUS_OK for e in entries), bool, size)
+    audited = np.array(list(map(attrgetter("status"), entries)), dtype=object) == STATUS_OK
     result = metrics.compute(
-        [e.model for e in entries], floats("a"), floats("b"), floats("c"), floats("k1"),
-        floats("k2"), floats("crop_factor"), floats("aspect_ratio"), floats("focal"),
+        list(map(attrgetter("model"), entries)),
+        floats("a"),
+        floats("b"),
+        floats("c"),
+        floats("k1"),
+        floats("k2"),
+        floats("crop_factor"),
+        floats("aspect_ratio"),
+        floats("focal"),
         audited,
     )
     if source is None:
@@ -138,8 +213,13 @@ def audit_entries(entries: list[DistortionEntry],
 
 def format_float(value: float) -> str:
     """A float as the text formats write it: shortest round-trip, inf, or empty for NaN."""
-    if value != value:
-        return ""
-    if math.isinf(value):
-        return "inf" if value > 0 else "-inf"
-    return repr(value)
+    text = repr(value)
+    return "" if text == "nan" else text
+
+
+def format_floats(values: list[float]) -> list[str]:
+    """:func:`format_float` over a list, at C speed for the common case."""
+    texts = list(map(repr, values))
+    if "nan" in texts:
+        texts = ["" if text == "nan" else text for text in texts]
+    return texts

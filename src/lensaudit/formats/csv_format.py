@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 from typing import TYPE_CHECKING, TextIO
 
-from ..pipeline import COLUMNS, FLOAT_COLUMNS, format_float
+from ..pipeline import COLUMNS, FLOAT_COLUMNS, format_floats
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -22,7 +22,7 @@ def write(audit: Audit, stream: TextIO) -> None:
     for name in COLUMNS:
         values = audit.column(name)
         if name in FLOAT_COLUMNS:
-            values = [format_float(v) for v in values]
+            values = format_floats(values)
         elif name == "folds_in_image":
             values = [_BOOLEAN[v] for v in values]
         columns.append(values)

@@ -40,15 +40,15 @@ def document(audit: Audit) -> dict[str, Any]:
     columns = audit.columns()
     for name in FLOAT_COLUMNS:
         columns[name] = [_json_float(v) for v in columns[name]]
-    entries = [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(),
-                                                                    strict=True)]
+    entries = [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)]
     return {
         "lensaudit": __version__,
         "database": {
             "label": audit.source.label,
             "paths": [str(p) for p in audit.source.paths],
-            "files": [{"file": f.name, "entries": f.entries, "error": f.error}
-                      for f in audit.files],
+            "files": [
+                {"file": f.name, "entries": f.entries, "error": f.error} for f in audit.files
+            ],
         },
         "summary": _clean(audit.summary.to_dict()),
         "entries": entries,

@@ -14,8 +14,9 @@ if TYPE_CHECKING:
 PROBLEMS_SHOWN = 10
 
 
-def text_table(header: Sequence[str], rows: Sequence[Sequence[object]],
-               right: Sequence[bool] | None = None) -> list[str]:
+def text_table(
+    header: Sequence[str], rows: Sequence[Sequence[object]], right: Sequence[bool] | None = None
+) -> list[str]:
     """Rows aligned in columns under a header; numbers right-aligned by default."""
     cells = [[str(c) for c in header]] + [[str(c) for c in row] for row in rows]
     widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
@@ -23,8 +24,10 @@ def text_table(header: Sequence[str], rows: Sequence[Sequence[object]],
         right = [i > 0 for i in range(len(header))]
     lines = []
     for row in cells:
-        parts = [cell.rjust(w) if r else cell.ljust(w)
-                 for cell, w, r in zip(row, widths, right, strict=True)]
+        parts = [
+            cell.rjust(w) if r else cell.ljust(w)
+            for cell, w, r in zip(row, widths, right, strict=True)
+        ]
         lines.append("  ".join(parts).rstrip())
     return lines
 
@@ -40,37 +43,57 @@ def _focal(value: float) -> str:
 def lines(audit: Audit) -> list[str]:
     """The summary as lines of text."""
     summary = audit.summary
-    out = [f"lensaudit {__version__}: {audit.source.label}",
-           f"{summary.files} files, {summary.entries} distortion entries, "
-           f"{summary.audited} audited", ""]
+    out = [
+        f"lensaudit {__version__}: {audit.source.label}",
+        f"{summary.files} files, {summary.entries} distortion entries, {summary.audited} audited",
+        "",
+    ]
 
     out.append("Table 1: entries whose distortion folds back (finite r_max)")
-    out += text_table(["model", "finite", "infinite", "%finite", "total"],
-                      [[r.model, r.finite, r.infinite, _percent(r.percent_finite), r.total]
-                       for r in summary.rows])
+    out += text_table(
+        ["model", "finite", "infinite", "%finite", "total"],
+        [
+            [r.model, r.finite, r.infinite, _percent(r.percent_finite), r.total]
+            for r in summary.rows
+        ],
+    )
     out.append("")
     out.append("Table 2: where D(r) goes beyond r_max (negative: back through the image)")
-    out += text_table(["model", "positive", "negative", "%negative", "total"],
-                      [[r.model, r.positive, r.negative, _percent(r.percent_negative),
-                        r.finite] for r in summary.rows])
+    out += text_table(
+        ["model", "positive", "negative", "%negative", "total"],
+        [
+            [r.model, r.positive, r.negative, _percent(r.percent_negative), r.finite]
+            for r in summary.rows
+        ],
+    )
     out.append("")
 
     folding = summary.folding
-    out.append(f"Entries that fold inside their own image, D(r_max) < image corner: "
-               f"{len(folding)}")
+    out.append(f"Entries that fold inside their own image, D(r_max) < image corner: {len(folding)}")
     if folding:
         entries = audit.entries
         m = audit.metrics
         out += text_table(
             ["r_normalized", "maker", "lens", "focal", "crop", "type", "where"],
-            [[f"{m.r_normalized[i]:.3f}", entries[i].maker, entries[i].lens,
-              _focal(entries[i].focal), f"{entries[i].crop_factor:g}", entries[i].type,
-              f"{entries[i].file}:{entries[i].line}"] for i in folding],
+            [
+                [
+                    f"{m.r_normalized[i]:.3f}",
+                    entries[i].maker,
+                    entries[i].lens,
+                    _focal(entries[i].focal),
+                    f"{entries[i].crop_factor:g}",
+                    entries[i].type,
+                    f"{entries[i].file}:{entries[i].line}",
+                ]
+                for i in folding
+            ],
             right=[True, False, False, True, True, False, False],
         )
-    out.append(f"(With the paper's mixed-unit image corner, hypot(18, 12) / (crop * focal), "
-               f"{summary.folding_paper_units_rectilinear} rectilinear entries would be "
-               f"flagged instead; see column r_normalized_paper.)")
+    out.append(
+        f"(With the paper's mixed-unit image corner, hypot(18, 12) / (crop * focal), "
+        f"{summary.folding_paper_units_rectilinear} rectilinear entries would be "
+        f"flagged instead; see column r_normalized_paper.)"
+    )
 
     problems = [e for e in audit.entries if e.status != "ok"]
     if problems:
@@ -80,8 +103,9 @@ def lines(audit: Audit) -> list[str]:
         for entry in problems[:PROBLEMS_SHOWN]:
             out.append(f"  {entry.file}:{entry.line}: {entry.status}: {entry.message}")
         if len(problems) > PROBLEMS_SHOWN:
-            out.append(f"  ... and {len(problems) - PROBLEMS_SHOWN} more "
-                       f"(all of them: --format csv)")
+            out.append(
+                f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"
+            )
     return out
 
 

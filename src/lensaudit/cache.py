@@ -1,0 +1,106 @@
+"""A cache of parsed database files, so that an unchanged database is not parsed again.
+
+Entries of each file are stored with the file's size and modification time
+(the check git and make rely on); a file whose size or time changed is parsed
+again. The cache lives in ``$LENSAUDIT_CACHE_DIR``, else
+``$XDG_CACHE_HOME/lensaudit``, else ``~/.cache/lensaudit``; one cache file per
+set of input paths, written atomically. It is an optimization only: any
+problem reading or writing it means parsing as if it were not there.
+
+The format is :mod:`marshal` of plain tuples: fast to read, and it cannot
+run code when read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import marshal
+import os
+import tempfile
+from dataclasses import fields
+from operator import attrgetter
+from pathlib import Path
+
+from . import __version__
+from .loader import DistortionEntry
+
+_FIELDS = tuple(f.name for f in fields(DistortionEntry))
+_as_tuple = attrgetter(*_FIELDS)
+# Bumped with the package version and with the record layout.
+_FORMAT = f"lensaudit-parse-cache {__version__} {' '.join(_FIELDS)}"
+
+CachedFile = tuple[list[DistortionEntry], str]
+
+
+def cache_dir() -> Path:
+    """Directory holding lensaudit's caches."""
+    explicit = os.environ.get("LENSAUDIT_CACHE_DIR")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "lensaudit"
+
+
+def _stamp(stat: os.stat_result) -> tuple[int, int]:
+    return stat.st_size, stat.st_mtime_ns
+
+
+class ParseCache:
+    """Parsed entries of files, keyed by absolute path, valid while size and mtime hold."""
+
+    def __init__(self, paths: list[Path], directory: Path | None = None) -> None:
+        key = "\0".join(sorted(str(p.resolve()) for p in paths))
+        name = hashlib.sha256(key.encode()).hexdigest()[:24] + ".marshal"
+        self.path = (directory or cache_dir()) / name
+        self._stored: dict[str, tuple[tuple[int, int], list[tuple], str]] = {}
+        self._seen: set[str] = set()
+        self._changed = False
+        try:
+            with open(self.path, "rb") as stream:
+                data = marshal.load(stream)
+            if isinstance(data, tuple) and len(data) == 2 and data[0] == _FORMAT:
+                self._stored = data[1]
+        except (OSError, EOFError, ValueError, TypeError):
+            self._stored = {}
+
+    def get(self, path: Path, stat: os.stat_result, name: str) -> CachedFile | None:
+        """Entries and file error stored for ``path``, if it has not changed since.
+
+        ``name`` is how the file is reported this time.
+        """
+        key = str(path)
+        self._seen.add(key)
+        found = self._stored.get(key)
+        if found is None or tuple(found[0]) != _stamp(stat):
+            return None
+        return [DistortionEntry(name, *row[1:]) for row in found[1]], found[2]
+
+    def put(
+        self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
+    ) -> None:
+        self._stored[str(path)] = (_stamp(stat), [_as_tuple(e) for e in entries], error)
+        self._seen.add(str(path))
+        self._changed = True
+
+    def save(self) -> None:
+        """Write the cache if anything changed; silently skipped when not possible.
+
+        Files not seen in this run (removed from the database) are dropped.
+        """
+        stale = self._stored.keys() - self._seen
+        if not (self._changed or stale):
+            return
+        kept = {k: v for k, v in self._stored.items() if k in self._seen}
+        temporary = None
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            handle, temporary = tempfile.mkstemp(dir=self.path.parent, suffix=".tmp")
+            with os.fdopen(handle, "wb") as stream:
+                marshal.dump((_FORMAT, kept), stream)
+            os.replace(temporary, self.path)
+            temporary = None
+        except (OSError, ValueError):
+            pass
+        finally:
+            if temporary is not None:
+                Path(temporary).unlink(missing_ok=True)
