@@ -39,8 +39,12 @@ def print_table(rows: list[dict]) -> None:
     cells = [header] + [[_cell(row.get(k, "")) for k in header] for row in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
     for index, row in enumerate(cells):
-        print("  " + "  ".join(c.rjust(w) if j else c.ljust(w)
-                               for j, (c, w) in enumerate(zip(row, widths))))
+        print(
+            "  "
+            + "  ".join(
+                c.rjust(w) if j else c.ljust(w) for j, (c, w) in enumerate(zip(row, widths, strict=True))
+            )
+        )
         if index == 0:
             print("  " + "  ".join("-" * w for w in widths))
 
@@ -60,8 +64,10 @@ def main() -> int:
     unknown = [n for n in names if n not in sections()]
     if unknown:
         parser.error(f"unknown sections {unknown}; known: {sections()}")
-    print(f"lensaudit benchmarks on {platform.machine()}, Python {platform.python_version()}, "
-          f"{time.strftime('%Y-%m-%d %H:%M')}")
+    print(
+        f"lensaudit benchmarks on {platform.machine()}, Python {platform.python_version()}, "
+        f"{time.strftime('%Y-%m-%d %H:%M')}"
+    )
     for name in names:
         module = importlib.import_module(f"benchmarks.{name}")
         print(f"\n== {module.TITLE}")

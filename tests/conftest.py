@@ -17,8 +17,9 @@ def bundled_db() -> Path:
     return bundled_database_path()
 
 
-def lens_xml(*distortions: str, cropfactor: str | None = "1", extra: str = "",
-             calibration: str = "") -> str:
+def lens_xml(
+    *distortions: str, cropfactor: str | None = "1", extra: str = "", calibration: str = ""
+) -> str:
     """A one-lens database whose calibration holds the given <distortion> lines."""
     crop = f"<cropfactor>{cropfactor}</cropfactor>" if cropfactor is not None else ""
     body = "\n            ".join(distortions)

@@ -39,8 +39,12 @@ def central_row(lens, entry, scale):
     """(output x, source x) along the right half of the central row, in Hugin units."""
     width = round(HEIGHT * max(entry.aspect_ratio, 1 / entry.aspect_ratio))
     modifier = lensfunpy.Modifier(lens, entry.crop_factor, width, HEIGHT)
-    modifier.initialize(entry.focal, lens.max_aperture or 2.8, scale=scale,
-                        flags=lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.SCALE)
+    modifier.initialize(
+        entry.focal,
+        lens.max_aperture or 2.8,
+        scale=scale,
+        flags=lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.SCALE,
+    )
     row = modifier.apply_geometry_distortion(0, HEIGHT // 2, width, 1)[0].astype(np.float64)
     centre = (width - 1) / 2
     unit = (HEIGHT - 1) / 2
@@ -69,16 +73,18 @@ def test_liblensfun_peaks_at_d_max_for_every_entry_that_folds_in_the_image(audit
 
 def test_liblensfun_peaks_at_d_max_for_a_sample_of_finite_entries(audit, lenses):
     m = audit.metrics
-    finite = sorted(set(np.flatnonzero(np.isfinite(m.r_max) & audit.audited))
-                    & calibrated_once(audit))
+    finite = sorted(
+        set(np.flatnonzero(np.isfinite(m.r_max) & audit.audited)) & calibrated_once(audit)
+    )
     sample = np.random.default_rng(7).choice(finite, 40, replace=False)
     assert _check_peaks(audit, lenses, sample.tolist()) >= 35
 
 
 def test_liblensfun_never_folds_where_r_max_is_infinite(audit, lenses):
     m = audit.metrics
-    infinite = sorted(set(np.flatnonzero(np.isinf(m.r_max) & audit.audited))
-                      & calibrated_once(audit))
+    infinite = sorted(
+        set(np.flatnonzero(np.isinf(m.r_max) & audit.audited)) & calibrated_once(audit)
+    )
     sample = np.random.default_rng(11).choice(infinite, 40, replace=False)
     checked = 0
     for i in sample.tolist():

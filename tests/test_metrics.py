@@ -8,11 +8,12 @@ import mpmath
 import numpy as np
 import pytest
 
-from lensaudit import metrics, normalizer
+from lensaudit import metrics
 
 
-def compute(model, a=np.nan, b=np.nan, c=np.nan, k1=np.nan, k2=np.nan, crop=1.0, aspect=1.5,
-            focal=20.0):
+def compute(
+    model, a=np.nan, b=np.nan, c=np.nan, k1=np.nan, k2=np.nan, crop=1.0, aspect=1.5, focal=20.0
+):
     return metrics.compute([model], [a], [b], [c], [k1], [k2], [crop], [aspect], [focal], [True])
 
 
@@ -68,19 +69,29 @@ def test_paper_corner_is_the_papers_equation_29():
     result = compute("poly3", k1=-0.1, crop=1.5, focal=20)
     assert result.r_corner_paper[0] == pytest.approx(math.hypot(18, 12) / 30, rel=1e-15)
     assert result.r_normalized_paper[0] == pytest.approx(
-        result.d_max[0] / (math.hypot(18, 12) / 30), rel=1e-15)
+        result.d_max[0] / (math.hypot(18, 12) / 30), rel=1e-15
+    )
 
 
 def test_folds_in_image_means_d_max_below_the_corner():
-    mild = compute("poly3", k1=-0.05)   # fold far outside the corner
+    mild = compute("poly3", k1=-0.05)  # fold far outside the corner
     strong = compute("poly3", k1=-0.3)  # fold inside
     assert mild.r_normalized[0] > 1 and not mild.folds_in_image[0]
     assert strong.r_normalized[0] < 1 and strong.folds_in_image[0]
 
 
 def test_entries_not_audited_get_no_metrics():
-    result = metrics.compute(["poly3", "acm"], [np.nan] * 2, [np.nan] * 2, [np.nan] * 2,
-                             [-0.1, 0.2], [np.nan] * 2, [1, 1], [1.5, 1.5], [10, 10],
-                             [True, False])
+    result = metrics.compute(
+        ["poly3", "acm"],
+        [np.nan] * 2,
+        [np.nan] * 2,
+        [np.nan] * 2,
+        [-0.1, 0.2],
+        [np.nan] * 2,
+        [1, 1],
+        [1.5, 1.5],
+        [10, 10],
+        [True, False],
+    )
     assert np.isfinite(result.r_max[0]) and np.isnan(result.r_max[1])
     assert not result.folds_in_image[1] and result.tail[1] == 0

@@ -36,8 +36,12 @@ def assert_close_to_exact(value, exact, rel=4e-16):
 def test_ptlens_cubic_is_normalized_derivative(seed):
     a, b, c = rationals(seed, 3)
     d = 1 - a - b - c
-    expr = r * (sympy.Rational(a) * r**3 + sympy.Rational(b) * r**2
-                + sympy.Rational(c) * r + sympy.Rational(d))
+    expr = r * (
+        sympy.Rational(a) * r**3
+        + sympy.Rational(b) * r**2
+        + sympy.Rational(c) * r
+        + sympy.Rational(d)
+    )
     (ea, eb, ec), constant = exact_cubic(expr, 1)
     cubic = normalizer.ptlens(float(a), float(b), float(c))
     assert cubic.power == 1
@@ -69,18 +73,23 @@ def test_poly5_cubic_is_normalized_derivative(seed):
     (ea, eb, ec), _ = exact_cubic(expr, 2)
     cubic = normalizer.poly5(float(k1), float(k2))
     assert (float(cubic.a), float(cubic.b), float(cubic.c)) == pytest.approx(
-        (float(ea), float(eb), float(ec)), rel=1e-15)
+        (float(ea), float(eb), float(ec)), rel=1e-15
+    )
 
 
-@pytest.mark.parametrize(("model", "power", "factors"), [
-    (normalizer.basic_polynomial, 1, (2, 3, 4)),   # paper Eq. 5
-    (normalizer.brown_conrady, 2, (3, 5, 7)),      # paper Eq. 6
-])
+@pytest.mark.parametrize(
+    ("model", "power", "factors"),
+    [
+        (normalizer.basic_polynomial, 1, (2, 3, 4)),  # paper Eq. 5
+        (normalizer.brown_conrady, 2, (3, 5, 7)),  # paper Eq. 6
+    ],
+)
 def test_paper_models_fold_the_derivative_constants_into_the_cubic(model, power, factors):
     cubic = model(0.1, -0.2, 0.3)
     assert cubic.power == power
     assert (float(cubic.a), float(cubic.b), float(cubic.c)) == pytest.approx(
-        (factors[0] * 0.1, factors[1] * -0.2, factors[2] * 0.3), rel=1e-15)
+        (factors[0] * 0.1, factors[1] * -0.2, factors[2] * 0.3), rel=1e-15
+    )
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -94,10 +103,16 @@ def test_evaluate_matches_the_model_formula(seed):
     k1, k2 = a, b
     np.testing.assert_allclose(
         normalizer.evaluate(normalizer.poly5(k1, k2).distortion, radii),
-        radii * (1 + k1 * radii**2 + k2 * radii**4), rtol=1e-13, atol=1e-15)
+        radii * (1 + k1 * radii**2 + k2 * radii**4),
+        rtol=1e-13,
+        atol=1e-15,
+    )
     np.testing.assert_allclose(
         normalizer.evaluate(normalizer.poly3(k1).distortion, radii),
-        radii * (1 - k1 + k1 * radii**2), rtol=1e-13, atol=1e-15)
+        radii * (1 - k1 + k1 * radii**2),
+        rtol=1e-13,
+        atol=1e-15,
+    )
 
 
 def test_leading_sign_is_the_sign_at_infinity():

@@ -9,14 +9,16 @@ import math
 
 import pytest
 from click.testing import CliRunner
-from conftest import lens_xml
 
+from conftest import lens_xml
 from lensaudit.cli import main
 from lensaudit.pipeline import COLUMNS
 
-EXPECTED_HEADER = ("file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,real_focal,"
-                   "a,b,c,k1,k2,r_max,d_max,tail,r_corner,r_normalized,r_corner_paper,"
-                   "r_normalized_paper,folds_in_image,status,message")
+EXPECTED_HEADER = (
+    "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,real_focal,"
+    "a,b,c,k1,k2,r_max,d_max,tail,r_corner,r_normalized,r_corner_paper,"
+    "r_normalized_paper,folds_in_image,status,message"
+)
 
 
 @pytest.fixture
@@ -26,11 +28,14 @@ def runner():
 
 @pytest.fixture
 def small_db(write_xml):
-    path = write_xml(lens_xml(
-        '<distortion model="poly3" focal="10" k1="-0.3"/>',
-        '<distortion model="poly3" focal="20" k1="0.01"/>',
-        '<distortion model="acm" focal="30" k1="0.01"/>',
-        '<distortion model="ptlens" focal="40" a="x"/>'))
+    path = write_xml(
+        lens_xml(
+            '<distortion model="poly3" focal="10" k1="-0.3"/>',
+            '<distortion model="poly3" focal="20" k1="0.01"/>',
+            '<distortion model="acm" focal="30" k1="0.01"/>',
+            '<distortion model="ptlens" focal="40" a="x"/>',
+        )
+    )
     return path.parent
 
 
@@ -45,9 +50,15 @@ def test_every_entry_appears_in_csv_with_status(runner, small_db):
     result = runner.invoke(main, ["scan", str(small_db), "-f", "csv"])
     rows = list(csv.DictReader(io.StringIO(result.output)))
     assert [(r["focal"], r["status"]) for r in rows] == [
-        ("10.0", "ok"), ("20.0", "ok"), ("30.0", "unknown_model"), ("40.0", "bad_value")]
+        ("10.0", "ok"),
+        ("20.0", "ok"),
+        ("30.0", "unknown_model"),
+        ("40.0", "bad_value"),
+    ]
     assert rows[0]["folds_in_image"] == "true" and rows[0]["tail"] == "negative"
-    assert rows[1]["r_max"] == "inf" and rows[1]["tail"] == "" and rows[1]["folds_in_image"] == "false"
+    assert (
+        rows[1]["r_max"] == "inf" and rows[1]["tail"] == "" and rows[1]["folds_in_image"] == "false"
+    )
     assert rows[2]["r_max"] == "" and rows[2]["folds_in_image"] == ""
     assert rows[0]["file"] == "test.xml" and int(rows[0]["line"]) == 10
 
@@ -67,7 +78,11 @@ def test_json_has_entries_and_summary(runner, small_db):
     assert document["entries"][1]["r_max"] == "inf"
     total = document["summary"]["table1"][-1]
     assert (total["model"], total["finite"], total["infinite"], total["total"]) == (
-        "Total", 1, 1, 2)
+        "Total",
+        1,
+        1,
+        2,
+    )
     assert document["summary"]["statuses"] == {"ok": 2, "bad_value": 1, "unknown_model": 1}
 
 

@@ -28,8 +28,9 @@ if TYPE_CHECKING:
 __all__ = ["__version__", "audit", "min_positive_root", "run"]
 
 
-def audit(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None
-          ) -> pandas.DataFrame:
+def audit(
+    path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None,
+) -> pandas.DataFrame:
     """Audit a Lensfun database and return one row per distortion entry.
 
     ``path`` is a database directory, an XML file, a list of those, or None

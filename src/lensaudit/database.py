@@ -29,8 +29,10 @@ def bundled_database_path() -> Path:
     """Directory of the Lensfun database installed with lensfunpy."""
     spec = find_spec("lensfunpy")
     if spec is None or not spec.submodule_search_locations:
-        raise LoadError("lensfunpy is not installed: give a database path, "
-                        "or install it with `pip install lensfunpy`")
+        raise LoadError(
+            "lensfunpy is not installed: give a database path, "
+            "or install it with `pip install lensfunpy`"
+        )
     path = Path(next(iter(spec.submodule_search_locations))) / "db_files"
     if not path.is_dir():
         raise LoadError(f"lensfunpy is installed but has no database at {path}")
@@ -53,8 +55,11 @@ def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> Dat
         resolved = tuple(Path(p) for p in paths)
         return DatabaseSource(resolved, ", ".join(str(p) for p in resolved))
     path = bundled_database_path()
-    return DatabaseSource((path,), f"Lensfun database bundled with lensfunpy "
-                          f"{lensfunpy_version()} ({path})", bundled=True)
+    return DatabaseSource(
+        (path,),
+        f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
+        bundled=True,
+    )
 
 
 def timestamp(directory: Path) -> str:

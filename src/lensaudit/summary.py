@@ -70,19 +70,39 @@ class Summary:
 
     def table1(self) -> list[dict[str, Any]]:
         """Rows of Table 1: model, finite, infinite, percent_finite, total."""
-        return [dict(model=r.model, finite=r.finite, infinite=r.infinite,
-                     percent_finite=r.percent_finite, total=r.total) for r in self.rows]
+        return [
+            dict(
+                model=r.model,
+                finite=r.finite,
+                infinite=r.infinite,
+                percent_finite=r.percent_finite,
+                total=r.total,
+            )
+            for r in self.rows
+        ]
 
     def table2(self) -> list[dict[str, Any]]:
         """Rows of Table 2: model, positive, negative, percent_negative, total."""
-        return [dict(model=r.model, positive=r.positive, negative=r.negative,
-                     percent_negative=r.percent_negative, total=r.finite) for r in self.rows]
+        return [
+            dict(
+                model=r.model,
+                positive=r.positive,
+                negative=r.negative,
+                percent_negative=r.percent_negative,
+                total=r.finite,
+            )
+            for r in self.rows
+        ]
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return dict(
-            entries=self.entries, audited=self.audited, files=self.files,
-            statuses=self.statuses, table1=self.table1(), table2=self.table2(),
+            entries=self.entries,
+            audited=self.audited,
+            files=self.files,
+            statuses=self.statuses,
+            table1=self.table1(),
+            table2=self.table2(),
             folds_in_image=len(self.folding),
             folds_in_image_rectilinear=self.folding_rectilinear,
             folds_in_image_paper_units_rectilinear=self.folding_paper_units_rectilinear,

@@ -28,8 +28,11 @@ class LazyGroup(click.Group):
     """A click group whose subcommands are imported on first use."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return [name for name, (module, _) in SUBCOMMANDS.items()
-                if find_spec(f"{__name__}.{module}") is not None]
+        return [
+            name
+            for name, (module, _) in SUBCOMMANDS.items()
+            if find_spec(f"{__name__}.{module}") is not None
+        ]
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name not in self.list_commands(ctx):

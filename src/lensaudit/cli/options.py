@@ -17,7 +17,9 @@ EXIT_INPUT_ERROR = 2
 def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
     """``[PATH ...]``: Lensfun database directories or XML files."""
     return click.argument(
-        "paths", nargs=-1, metavar="[PATH ...]",
+        "paths",
+        nargs=-1,
+        metavar="[PATH ...]",
         type=click.Path(path_type=Path, exists=False),
     )(function)
 
@@ -25,8 +27,11 @@ def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
 def output_file(function: Callable[..., Any]) -> Callable[..., Any]:
     """``-o FILE``: where to write instead of standard output."""
     return click.option(
-        "-o", "--output", type=click.Path(path_type=Path, dir_okay=False, allow_dash=True),
-        default=None, help="Write to FILE instead of standard output.",
+        "-o",
+        "--output",
+        type=click.Path(path_type=Path, dir_okay=False, allow_dash=True),
+        default=None,
+        help="Write to FILE instead of standard output.",
     )(function)
 
 

@@ -13,9 +13,15 @@ FORMAT_NAMES = ("table", "csv", "json")
 
 @click.command()
 @database_paths
-@click.option("-f", "--format", "output_format", type=click.Choice(FORMAT_NAMES),
-              default="table", show_default=True,
-              help="table: readable summary; csv, json: every entry with its metrics.")
+@click.option(
+    "-f",
+    "--format",
+    "output_format",
+    type=click.Choice(FORMAT_NAMES),
+    default="table",
+    show_default=True,
+    help="table: readable summary; csv, json: every entry with its metrics.",
+)
 @output_file
 def scan(paths: tuple[Path, ...], output_format: str, output: Path | None) -> None:
     """Compute r_max for every distortion entry of a Lensfun database.
