@@ -364,11 +364,6 @@ def test_a_distortion_in_a_file_that_is_not_well_formed_is_counted_not_checked(w
     assert result.files[0].entries == 2
 
 
-@pytest.mark.xfail(
-    reason="the loader drops <tca>/<vignetting> elements before parsing, so content after "
-    "the root element or a repeated attribute in them goes unnoticed by `scan`",
-    strict=False,
-)
 def test_scan_reports_content_after_the_root_element(write_xml):
     xml = lens_xml(FOLDING) + '<tca model="linear" focal="10" kr="1" kb="1"/>\n'
     path = write_xml(xml)
@@ -376,6 +371,15 @@ def test_scan_reports_content_after_the_root_element(write_xml):
     result = CliRunner().invoke(main, ["scan", str(plain.parent), "-f", "json"])
     statuses = {(e["file"], e["status"]) for e in json.loads(result.output)["entries"]}
     assert (path.name, "xml_error") in statuses
+
+
+def test_scan_reports_a_repeated_attribute_in_an_unread_element(write_xml):
+    xml = lens_xml(FOLDING, '<tca model="linear" model="poly3" focal="10"/>')
+    path = write_xml(xml)
+    plain = write_xml(lens_xml(FOLDING), "plain.xml")
+    result = CliRunner().invoke(main, ["scan", str(plain.parent), "-f", "json"])
+    statuses = {(e["file"], e["status"]) for e in json.loads(result.output)["entries"]}
+    assert statuses == {(path.name, "xml_error"), (plain.name, "ok")}
 
 
 def test_no_output_format_leaks_environment_or_traceback(write_xml, monkeypatch):

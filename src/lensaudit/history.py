@@ -609,12 +609,10 @@ class _Auditor:
 
 
 def default_cache_dir() -> Path:
-    """``$LENSAUDIT_CACHE_DIR``, else ``$XDG_CACHE_HOME/lensaudit``, else ``~/.cache/lensaudit``."""
-    explicit = os.environ.get("LENSAUDIT_CACHE_DIR")
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "lensaudit"
+    """lensaudit's cache directory (see :func:`lensaudit.cache.cache_dir`)."""
+    from .cache import cache_dir
+
+    return cache_dir()
 
 
 def _fingerprint() -> str:
