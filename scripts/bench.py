@@ -39,12 +39,11 @@ def print_table(rows: list[dict]) -> None:
     cells = [header] + [[_cell(row.get(k, "")) for k in header] for row in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
     for index, row in enumerate(cells):
-        print(
-            "  "
-            + "  ".join(
-                c.rjust(w) if j else c.ljust(w) for j, (c, w) in enumerate(zip(row, widths, strict=True))
-            )
+        cells_out = (
+            c.rjust(w) if j else c.ljust(w)
+            for j, (c, w) in enumerate(zip(row, widths, strict=True))
         )
+        print("  " + "  ".join(cells_out))
         if index == 0:
             print("  " + "  ".join("-" * w for w in widths))
 

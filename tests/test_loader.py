@@ -343,6 +343,9 @@ def test_real_focal_attribute_wins_over_the_element():
 
 
 def test_long_bad_values_are_cut_short_in_messages():
-    entry = only(load_bytes(lens_xml(
-        f'<distortion model="poly3" focal="8" k1="{"9" * 5000}"/>').encode(), "db.xml"))
+    entry = only(
+        load_bytes(
+            lens_xml(f'<distortion model="poly3" focal="8" k1="{"9" * 5000}"/>').encode(), "db.xml"
+        )
+    )
     assert entry.status == "bad_value" and len(entry.message) < 200

@@ -7,8 +7,9 @@ again. The cache lives in ``$LENSAUDIT_CACHE_DIR``, else
 set of input paths, written atomically. It is an optimization only: any
 problem reading or writing it means parsing as if it were not there.
 
-The format is :mod:`marshal` of plain tuples: fast to read, and it cannot
-run code when read.
+The format is :mod:`marshal` of a few large objects per file: each column of
+the entries as one joined string or one block of doubles. Reading it creates
+no object per value until the entries are built, and it cannot run code.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import hashlib
 import marshal
 import os
 import tempfile
+from array import array
 from dataclasses import fields
 from operator import attrgetter
 from pathlib import Path
@@ -25,9 +27,40 @@ from . import __version__
 from .loader import DistortionEntry
 
 _FIELDS = tuple(f.name for f in fields(DistortionEntry))
-_as_tuple = attrgetter(*_FIELDS)
+_NUMBERS = ("crop_factor", "aspect_ratio", "focal", "real_focal", "a", "b", "c", "k1", "k2")
+_TEXTS = ("maker", "lens", "type", "model", "status", "message")
 # Bumped with the package version and with the record layout.
-_FORMAT = f"lensaudit-parse-cache {__version__} {' '.join(_FIELDS)}"
+_FORMAT = f"lensaudit-parse-cache 2 {__version__} {' '.join(_FIELDS)}"
+_SEPARATOR = "\0"
+
+
+def _pack(entries: list[DistortionEntry]) -> dict[str, object]:
+    """Entries as columns: doubles as bytes, texts joined, mounts joined twice."""
+    packed: dict[str, object] = {"count": len(entries)}
+    packed["line"] = array("q", map(attrgetter("line"), entries)).tobytes()
+    for name in _NUMBERS:
+        packed[name] = array("d", map(attrgetter(name), entries)).tobytes()
+    for name in _TEXTS:
+        packed[name] = _SEPARATOR.join(map(attrgetter(name), entries))
+    packed["mounts"] = "\2".join("\1".join(e.mounts) for e in entries)
+    return packed
+
+
+def _unpack(packed: dict, name: str) -> list[DistortionEntry]:
+    count = packed["count"]
+    if count == 0:
+        return []
+    columns: dict[str, list] = {"file": [name] * count}
+    columns["line"] = array("q", packed["line"]).tolist()
+    for column in _NUMBERS:
+        columns[column] = array("d", packed[column]).tolist()
+    for column in _TEXTS:
+        columns[column] = packed[column].split(_SEPARATOR)
+    columns["mounts"] = [tuple(m.split("\1")) if m else () for m in packed["mounts"].split("\2")]
+    if any(len(values) != count for values in columns.values()):
+        raise ValueError("inconsistent cache record")
+    return list(map(DistortionEntry, *(columns[f] for f in _FIELDS)))
+
 
 CachedFile = tuple[list[DistortionEntry], str]
 
@@ -52,7 +85,7 @@ class ParseCache:
         key = "\0".join(sorted(str(p.resolve()) for p in paths))
         name = hashlib.sha256(key.encode()).hexdigest()[:24] + ".marshal"
         self.path = (directory or cache_dir()) / name
-        self._stored: dict[str, tuple[tuple[int, int], list[tuple], str]] = {}
+        self._stored: dict[str, tuple[tuple[int, int], dict, str]] = {}
         self._seen: set[str] = set()
         self._changed = False
         try:
@@ -73,12 +106,15 @@ class ParseCache:
         found = self._stored.get(key)
         if found is None or tuple(found[0]) != _stamp(stat):
             return None
-        return [DistortionEntry(name, *row[1:]) for row in found[1]], found[2]
+        try:
+            return _unpack(found[1], name), found[2]
+        except (KeyError, TypeError, ValueError, AttributeError):
+            return None
 
     def put(
         self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
     ) -> None:
-        self._stored[str(path)] = (_stamp(stat), [_as_tuple(e) for e in entries], error)
+        self._stored[str(path)] = (_stamp(stat), _pack(entries), error)
         self._seen.add(str(path))
         self._changed = True
 

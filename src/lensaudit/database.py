@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 from dataclasses import dataclass
 from importlib.util import find_spec
 from pathlib import Path
@@ -40,7 +41,21 @@ def bundled_database_path() -> Path:
 
 
 def lensfunpy_version() -> str:
-    """Installed lensfunpy version, or "" when it is not installed."""
+    """Installed lensfunpy version, or "" when it is not installed.
+
+    Read from lensfunpy's ``_version.py`` when it has one: importing
+    importlib.metadata costs more than the rest of finding the database.
+    """
+    spec = find_spec("lensfunpy")
+    if spec is None or not spec.submodule_search_locations:
+        return ""
+    version_file = Path(next(iter(spec.submodule_search_locations))) / "_version.py"
+    try:
+        match = re.search(r"""__version__\s*=\s*["']([^"']+)["']""", version_file.read_text())
+    except OSError:
+        match = None
+    if match:
+        return match.group(1)
     from importlib.metadata import PackageNotFoundError, version
 
     try:

@@ -15,10 +15,10 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -56,9 +56,12 @@ class LoadError(Exception):
     """The input as a whole could not be read (no such path, no XML files)."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class DistortionEntry:
     """One ``<distortion>`` element with the lens context it applies to.
+
+    Treat it as read-only (it is not frozen only because frozen dataclasses
+    are ten times slower to create, and a database has thousands of these).
 
     Coefficients are the raw model coefficients (``a b c`` for ptlens, ``k1``
     for poly3, ``k1 k2`` for poly5); coefficients the model does not use are
@@ -248,8 +251,11 @@ def _calibration_context(calibration: etree._Element | None, lens: _LensContext)
             real_focals[focal] = _positive(parse_number(element.get("real-focal")), "real focal")
         except ValueError as error:
             problems.append(f"<real-focal-length> on line {element.sourceline}: {error}")
-    if crop_text is None and aspect_text is None and not real_focals and len(problems) == bool(
-        lens.problem
+    if (
+        crop_text is None
+        and aspect_text is None
+        and not real_focals
+        and len(problems) == bool(lens.problem)
     ):
         return lens
     crop_factor, aspect_ratio = lens.crop_factor, lens.aspect_ratio
@@ -303,17 +309,10 @@ def _number(
     return value
 
 
-def _plain_number(text: str) -> float:
-    """float(text) for a plain finite ASCII number, else ValueError (see parse_number)."""
-    value = float(text)
-    if value - value != 0 or not text.isascii() or "_" in text:
-        raise ValueError(text)
-    return value
-
-
-# Positions of a, b, c, k1, k2 filled by each model's coefficients.
-_COEFFICIENT_SLOTS = {
-    model: tuple(("a", "b", "c", "k1", "k2").index(n) for n in names)
+# Per model: the coefficient attributes, and the record layout of a, b, c, k1, k2
+# with None where the model's coefficients go in order.
+_COEFFICIENT_LAYOUT = {
+    model: [None if n in names else NAN for n in ("a", "b", "c", "k1", "k2")]
     for model, names in MODEL_COEFFICIENTS.items()
 }
 
@@ -328,22 +327,27 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
     model = get("model")
     names = MODEL_COEFFICIENTS.get(model)  # type: ignore[arg-type]
     focal_text = get("focal")
+    real_text = get("real-focal")
     if names is not None and focal_text is not None and not context.problem:
-        try:
-            focal = _plain_number(focal_text)
-            real_text = get("real-focal")
-            if real_text is None:
-                real_focal = context.real_focals.get(focal, NAN)
-            else:
-                real_focal = _plain_number(real_text)
-            coefficients = [NAN] * 5
-            for slot, attribute in zip(_COEFFICIENT_SLOTS[model], names, strict=True):  # type: ignore[index]
-                text = get(attribute)
-                coefficients[slot] = 0.0 if text is None else _plain_number(text)
-        except ValueError:
-            pass
-        else:
-            if focal > 0 and not real_focal <= 0:
+        texts = [focal_text, real_text or "1"] + [get(n, "0") for n in names]
+        joined = "".join(texts)
+        # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
+        if joined.isascii() and "_" not in joined:
+            try:
+                values = list(map(float, texts))
+            except ValueError:
+                values = None
+            total = sum(values) if values else NAN
+            if total - total == 0 and values[0] > 0 and values[1] > 0:  # all finite
+                focal = values[0]
+                if real_text is None:
+                    real_focal = context.real_focals.get(focal, NAN)
+                else:
+                    real_focal = values[1]
+                coefficients = iter(values[2:])
+                layout = [
+                    next(coefficients) if v is None else v for v in _COEFFICIENT_LAYOUT[model]
+                ]  # type: ignore[index]
                 return DistortionEntry(
                     name,
                     element.sourceline or 0,
@@ -353,10 +357,10 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
                     context.type,
                     context.crop_factor,
                     context.aspect_ratio,
-                    model,
+                    model,  # type: ignore[arg-type]
                     focal,
-                    real_focal,  # type: ignore[arg-type]
-                    *coefficients,
+                    real_focal,
+                    *layout,
                 )
     return _checked_entry(element, name, context)
 
@@ -409,20 +413,30 @@ def _checked_entry(element: etree._Element, name: str, context: _LensContext) ->
 
 def entries_from_tree(root: etree._Element, name: str) -> Iterator[DistortionEntry]:
     """Records for every ``<distortion>`` element under ``root``, in document order."""
-    contexts: dict[etree._Element, _LensContext] = {}
-    for element in root.iter("distortion"):
-        calibration = element.getparent()
-        lens = calibration.getparent() if calibration is not None else None
-        if lens is None or lens.tag != "lens":
-            lens = next((e for e in element.iterancestors("lens")), None)
-        key = (lens, calibration)
-        context = contexts.get(key)
-        if context is None:
-            base = contexts.get(lens)
-            if base is None:
-                base = contexts[lens] = _lens_context(lens)
-            context = contexts[key] = _calibration_context(calibration, base)
-        yield _entry(element, name, context)
+    lens = calibration = None
+    lens_context = context = _lens_context(None)
+    for element in root.iter("lens", "calibration", "distortion"):
+        tag = element.tag
+        if tag == "distortion":
+            parent = element.getparent()
+            if parent is not calibration or (lens is None or parent.getparent() is not lens):
+                yield _entry(element, name, _context_of(element))
+            else:
+                yield _entry(element, name, context)
+        elif tag == "lens":
+            lens, calibration = element, None
+            lens_context = _lens_context(lens)
+        elif element.getparent() is lens:
+            calibration = element
+            context = _calibration_context(calibration, lens_context)
+
+
+def _context_of(element: etree._Element) -> _LensContext:
+    """The context of a ``<distortion>`` found outside lens/calibration (rare)."""
+    parent = element.getparent()
+    lens = next(element.iterancestors("lens"), None)
+    base = _lens_context(lens)
+    return _calibration_context(parent, base) if parent is not None else base
 
 
 def _salvage(data: bytes, name: str, reason: str) -> list[DistortionEntry]:
@@ -569,6 +583,36 @@ def load(
     given, supplies files parsed before and is given the ones parsed now.
     """
     return load_files(expand(paths), cache)
+
+
+def load_files_in_background(
+    targets: list[tuple[Path, str]], cache: EntryCache | None = None
+) -> Callable[[], LoadResult]:
+    """Start :func:`load_files` in a thread; call what is returned for its result.
+
+    libxml2 parses without holding the GIL, so the caller can meanwhile do
+    other work (import numpy, say). Exceptions are raised by the call.
+    """
+    import threading
+
+    outcome: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            outcome["result"] = load_files(targets, cache)
+        except BaseException as error:  # handed to the caller, not lost in the thread
+            outcome["error"] = error
+
+    thread = threading.Thread(target=work, name="lensaudit-load", daemon=True)
+    thread.start()
+
+    def result() -> LoadResult:
+        thread.join()
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["result"]
+
+    return result
 
 
 def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = None) -> LoadResult:

@@ -13,14 +13,16 @@ from functools import cached_property
 from operator import attrgetter
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from . import database, loader, metrics
+from . import database, loader
 from .loader import STATUS_OK, DistortionEntry, SourceFile
 
+# numpy (and so the metrics) is imported where it is first needed, so that
+# run() can start reading the database while numpy is still being imported.
 if TYPE_CHECKING:
+    import numpy as np
     import pandas
 
+    from . import metrics
     from .summary import Summary
 
 #: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
@@ -91,7 +93,7 @@ FLOAT_COLUMNS = frozenset(
     }
 )
 
-_TAIL_NAMES = {1: metrics.TAIL_POSITIVE, -1: metrics.TAIL_NEGATIVE, 0: ""}
+_TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}  # metrics.TAIL_POSITIVE, ...
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,8 @@ class Audit:
     @cached_property
     def audited(self) -> np.ndarray:
         """Boolean mask of entries with status ``ok``."""
+        import numpy as np
+
         return np.array(list(map(attrgetter("status"), self.entries)), dtype=object) == STATUS_OK
 
     def column(self, name: str) -> list[Any]:
@@ -176,7 +180,11 @@ def run(
         from .cache import ParseCache
 
         parse_cache = ParseCache([path for path, _ in targets])
-    loaded = loader.load_files(targets, parse_cache)
+    # libxml2 parses without holding the GIL: read the files while numpy imports.
+    pending = loader.load_files_in_background(targets, parse_cache)
+    from . import metrics  # noqa: F401  (the import is the point)
+
+    loaded = pending()
     if parse_cache is not None:
         parse_cache.save()
     return audit_entries(loaded.entries, source, loaded.files)
@@ -188,6 +196,10 @@ def audit_entries(
     files: list[SourceFile] | None = None,
 ) -> Audit:
     """Compute the metrics of already loaded entries."""
+    import numpy as np
+
+    from . import metrics
+
     size = len(entries)
 
     def floats(name: str) -> np.ndarray:

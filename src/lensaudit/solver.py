@@ -132,8 +132,13 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     # its right; otherwise, left of the local maximum. Decide with plain
     # arithmetic where its error bound allows, else compensated, else exactly.
     q_at_min = _q_plain(x_min, A, B, C)
+    # With C = 0 and the minimum at x = 0 (so B = 0 too), q = x^2 (x + A) touches
+    # zero exactly there: certain, and common (Lensfun's poly3, ptlens with a = 0).
+    touches_at_zero = (x_min == 0) & (C == 0)
     uncertain = np.flatnonzero(
-        has_critical & (np.abs(q_at_min) <= 4 * _EPS * _magnitude(x_min, A, B, C))
+        has_critical
+        & ~touches_at_zero
+        & (np.abs(q_at_min) <= 4 * _EPS * _magnitude(x_min, A, B, C))
     )
     if uncertain.size:
         xs, As, Bs, Cs = x_min[uncertain], A[uncertain], B[uncertain], C[uncertain]

@@ -23,7 +23,14 @@ FORMAT_NAMES = ("table", "csv", "json")
     help="table: readable summary; csv, json: every entry with its metrics.",
 )
 @output_file
-def scan(paths: tuple[Path, ...], output_format: str, output: Path | None) -> None:
+@click.option(
+    "--cache/--no-cache",
+    default=True,
+    show_default=True,
+    help="Reuse files parsed by an earlier run when unchanged (size and time); "
+    "the cache is in $LENSAUDIT_CACHE_DIR or ~/.cache/lensaudit.",
+)
+def scan(paths: tuple[Path, ...], output_format: str, output: Path | None, cache: bool) -> None:
     """Compute r_max for every distortion entry of a Lensfun database.
 
     PATH is a database directory (every *.xml in it) or XML files. Without
@@ -43,7 +50,7 @@ def scan(paths: tuple[Path, ...], output_format: str, output: Path | None) -> No
     from ..pipeline import run
 
     try:
-        audit = run(list(paths) or None)
+        audit = run(list(paths) or None, cache=cache)
     except LoadError as error:
         fail(str(error))
     if audit.files and all(f.error for f in audit.files):
