@@ -14,10 +14,9 @@ no object per value until the entries are built, and it cannot run code.
 
 from __future__ import annotations
 
-import hashlib
 import marshal
 import os
-import tempfile
+import zlib
 from array import array
 from dataclasses import fields
 from operator import attrgetter
@@ -83,7 +82,8 @@ class ParseCache:
 
     def __init__(self, paths: list[Path], directory: Path | None = None) -> None:
         key = "\0".join(sorted(str(p.resolve()) for p in paths))
-        name = hashlib.sha256(key.encode()).hexdigest()[:24] + ".marshal"
+        # A checksum is enough: the entries inside are keyed by absolute path.
+        name = f"parsed-{zlib.crc32(key.encode()):08x}.marshal"
         self.path = (directory or cache_dir()) / name
         self._stored: dict[str, tuple[tuple[int, int], dict, str]] = {}
         self._seen: set[str] = set()
@@ -127,6 +127,8 @@ class ParseCache:
         if not (self._changed or stale):
             return
         kept = {k: v for k, v in self._stored.items() if k in self._seen}
+        import tempfile
+
         temporary = None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,6 @@ liblensfun.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 from dataclasses import dataclass
@@ -87,6 +86,8 @@ def timestamp(directory: Path) -> str:
 
 def content_hash(files: list[Path]) -> str:
     """SHA-256 over the names and bytes of the files, in the order given."""
+    import hashlib
+
     digest = hashlib.sha256()
     for file in files:
         digest.update(file.name.encode() + b"\0")
