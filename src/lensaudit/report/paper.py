@@ -1,6 +1,7 @@
 """The paper's Tables 1-2 and named values beside an audit, every difference explained.
 
-The printed values live in ``data/paper_tables.json`` of the source tree.
+The printed values live in ``lensaudit/data/paper_tables.json`` (installed with the
+package; ``data/paper_tables.json`` of the source tree links to it).
 Each difference gets one line saying where it comes from, found by
 computation rather than asserted:
 
@@ -43,8 +44,8 @@ class PaperValuesError(Exception):
 
 
 def default_values_path() -> Path:
-    """``data/paper_tables.json`` of the source tree this module belongs to."""
-    return Path(__file__).resolve().parents[3] / "data" / "paper_tables.json"
+    """``paper_tables.json`` in the package's ``data`` directory."""
+    return Path(__file__).resolve().parents[1] / "data" / "paper_tables.json"
 
 
 def load_values(path: Path | None = None) -> dict[str, Any]:
@@ -54,8 +55,8 @@ def load_values(path: Path | None = None) -> dict[str, Any]:
         values = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise PaperValuesError(
-            f"the paper's values are not at {path} (they are kept in "
-            f"data/paper_tables.json of the lensaudit source tree)"
+            f"the paper's values are not at {path} (they are installed with "
+            f"lensaudit as lensaudit/data/paper_tables.json)"
         ) from None
     except (OSError, ValueError) as error:
         raise PaperValuesError(f"cannot read the paper's values from {path}: {error}") from None
