@@ -53,3 +53,20 @@ def write_xml(tmp_path: Path) -> Callable[..., Path]:
         return path
 
     return write
+
+
+@pytest.fixture(scope="session")
+def liblensfun_lenses() -> dict:
+    """liblensfun's lenses of the bundled database, by (maker, model, crop factor).
+
+    The crop factor is taken at single precision, as liblensfun keeps it, so
+    that it matches lensaudit's value rounded the same way.
+    """
+    lensfunpy = pytest.importorskip("lensfunpy")
+    import numpy as np
+
+    found: dict = {}
+    for lens in lensfunpy.Database().lenses:
+        key = (lens.maker.strip(), lens.model.strip(), float(np.float32(lens.crop_factor)))
+        found.setdefault(key, lens)
+    return found

@@ -50,13 +50,8 @@ def audit(bundled_db):
 
 
 @pytest.fixture(scope="module")
-def lenses():
-    """liblensfun's lenses by (maker, model, crop factor at single precision)."""
-    found = {}
-    for lens in lensfunpy.Database().lenses:
-        key = (lens.maker.strip(), lens.model.strip(), float(np.float32(lens.crop_factor)))
-        found.setdefault(key, lens)
-    return found
+def lenses(liblensfun_lenses):
+    return liblensfun_lenses
 
 
 @pytest.fixture(scope="module")

@@ -46,6 +46,7 @@ import numpy as np
 
 from . import __version__, loader, metrics
 from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
+from .pipeline import FLOAT_COLUMNS
 
 if TYPE_CHECKING:
     import pandas
@@ -124,22 +125,7 @@ INTRODUCED_COLUMNS = (
     "subject",
 )
 
-_FLOAT_INTRODUCED = frozenset(
-    {
-        "crop_factor",
-        "aspect_ratio",
-        "focal",
-        "a",
-        "b",
-        "c",
-        "k1",
-        "k2",
-        "r_max",
-        "d_max",
-        "r_normalized",
-        "r_normalized_paper",
-    }
-)
+_FLOAT_INTRODUCED = FLOAT_COLUMNS & frozenset(INTRODUCED_COLUMNS)
 
 # Index into a history's commits meaning "already there before the first commit examined".
 _BEFORE = -1

@@ -190,6 +190,35 @@ class _LensContext:
     # focal -> real focal, from <real-focal-length> elements of the calibration
     real_focals: dict[float, float] = field(default_factory=dict)
 
+    def record(
+        self,
+        name: str,
+        line: int,
+        model: str,
+        focal: float,
+        real_focal: float,
+        coefficients: list[float],
+        status: str = STATUS_OK,
+        message: str = "",
+    ) -> DistortionEntry:
+        """An entry of this lens; ``coefficients`` are a, b, c, k1, k2."""
+        return DistortionEntry(
+            name,
+            line,
+            self.maker,
+            self.lens,
+            self.mounts,
+            self.type,
+            self.crop_factor,
+            self.aspect_ratio,
+            model,
+            focal,
+            real_focal,
+            *coefficients,
+            status,
+            message,
+        )
+
 
 def _lens_context(lens: etree._Element | None) -> _LensContext:
     if lens is None:
@@ -348,20 +377,9 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
                 layout = [
                     next(coefficients) if v is None else v for v in _COEFFICIENT_LAYOUT[model]
                 ]  # type: ignore[index]
-                return DistortionEntry(
-                    name,
-                    element.sourceline or 0,
-                    context.maker,
-                    context.lens,
-                    context.mounts,
-                    context.type,
-                    context.crop_factor,
-                    context.aspect_ratio,
-                    model,  # type: ignore[arg-type]
-                    focal,
-                    real_focal,
-                    *layout,
-                )
+                return context.record(
+                    name, element.sourceline or 0, model, focal, real_focal, layout
+                )  # type: ignore[arg-type]
     return _checked_entry(element, name, context)
 
 
@@ -393,21 +411,9 @@ def _checked_entry(element: etree._Element, name: str, context: _LensContext) ->
     if problems:
         status = min((code for code, _ in problems), key=_STATUS_PRIORITY.index)
         message = "; ".join(text for _, text in problems)
-    return DistortionEntry(
-        name,
-        element.sourceline or 0,
-        context.maker,
-        context.lens,
-        context.mounts,
-        context.type,
-        context.crop_factor,
-        context.aspect_ratio,
-        model,
-        focal,
-        real_focal,
-        status=status,
-        message=message,
-        **coefficients,
+    layout = [coefficients.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")]
+    return context.record(
+        name, element.sourceline or 0, model, focal, real_focal, layout, status, message
     )
 
 

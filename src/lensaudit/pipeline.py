@@ -54,44 +54,17 @@ COLUMNS = (
     "message",
 )
 
-ENTRY_COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "real_focal",
-    "a",
-    "b",
-    "c",
-    "k1",
-    "k2",
-    "status",
+#: Columns computed by the audit; the others are read from the database.
+METRIC_COLUMNS = (
+    "r_max", "d_max", "tail", "r_corner", "r_normalized", "r_corner_paper",
+    "r_normalized_paper", "folds_in_image",
+)  # fmt: skip
+ENTRY_COLUMNS = tuple(name for name in COLUMNS if name not in METRIC_COLUMNS)
+#: Columns holding numbers (written as shortest round-trip floats, inf, or empty).
+FLOAT_COLUMNS = frozenset(COLUMNS) - {
+    "file", "line", "maker", "lens", "type", "model", "tail", "folds_in_image", "status",
     "message",
-)
-FLOAT_COLUMNS = frozenset(
-    {
-        "crop_factor",
-        "aspect_ratio",
-        "focal",
-        "real_focal",
-        "a",
-        "b",
-        "c",
-        "k1",
-        "k2",
-        "r_max",
-        "d_max",
-        "r_corner",
-        "r_normalized",
-        "r_corner_paper",
-        "r_normalized_paper",
-    }
-)
+}  # fmt: skip
 
 _TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}  # metrics.TAIL_POSITIVE, ...
 
