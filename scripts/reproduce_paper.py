@@ -6,7 +6,8 @@
     python scripts/reproduce_paper.py --git REPO --date 2021-05-30   # a revision from git
     python scripts/reproduce_paper.py ... -o DIR         # also write the full report
 
-The paper's values are in data/paper_tables.json (installed with the package). With --git, the newest
+The paper's values are in data/paper_tables.json (installed with the package).
+With --git, the newest
 commit of REPO (a clone of the Lensfun database history) at or before the end
 of DATE is extracted with `git archive` into a temporary directory; its
 data/db is audited. Every difference from the paper is printed on one line

@@ -37,11 +37,14 @@ def wall_time(command: list[str], env: dict[str, str]) -> float:
 
 
 def peak_memory_mb(command: list[str], env: dict[str, str]) -> float:
-    probe = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, "
-             "stdout=subprocess.DEVNULL); "
-             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
-    out = subprocess.run([sys.executable, "-c", probe, *command], check=True, env=env,
-                         capture_output=True, text=True).stdout
+    probe = (
+        "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, "
+        "stdout=subprocess.DEVNULL); "
+        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe, *command], check=True, env=env, capture_output=True, text=True
+    ).stdout
     return int(out.strip()) / 1024
 
 
@@ -83,15 +86,30 @@ def run(quick: bool) -> list[dict]:
                 times[name].append(wall_time(command, env))
         medians = {name: statistics.median(values) for name, values in times.items()}
         baseline = medians["liblensfun load (lensfunpy.Database)"]
-        rows = [{"run": name, "median s": medians[name], "vs liblensfun": medians[name] / baseline,
-                 "peak MB": peak_memory_mb(command, env)} for name, command in commands.items()]
+        rows = [
+            {
+                "run": name,
+                "median s": medians[name],
+                "vs liblensfun": medians[name] / baseline,
+                "peak MB": peak_memory_mb(command, env),
+            }
+            for name, command in commands.items()
+        ]
         os.environ["LENSAUDIT_CACHE_DIR"] = cache
         inside = in_process(repeats)
-        for name, label in (("liblensfun", "in-process: liblensfun load"),
-                            ("cold", "in-process: lensaudit load + audit, cold"),
-                            ("warm", "in-process: lensaudit load + audit, warm")):
-            rows.append({"run": label, "median s": inside[name],
-                         "vs liblensfun": inside[name] / inside["liblensfun"], "peak MB": ""})
+        for name, label in (
+            ("liblensfun", "in-process: liblensfun load"),
+            ("cold", "in-process: lensaudit load + audit, cold"),
+            ("warm", "in-process: lensaudit load + audit, warm"),
+        ):
+            rows.append(
+                {
+                    "run": label,
+                    "median s": inside[name],
+                    "vs liblensfun": inside[name] / inside["liblensfun"],
+                    "peak MB": "",
+                }
+            )
         return rows
     finally:
         shutil.rmtree(cache, ignore_errors=True)

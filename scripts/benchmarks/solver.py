@@ -63,16 +63,21 @@ def run(quick: bool) -> list[dict]:
         reps = -(-size // a.size)
         a, b, c = (np.tile(v, reps)[:size] for v in (a, b, c))
         ours = best_time(lambda a=a, b=b, c=c: min_positive_root(a, b, c), repeats)
-        paper = best_time(lambda a=a, b=b, c=c: min_positive_root_paper_vectorized(a, b, c),
-                          repeats)
+        paper = best_time(
+            lambda a=a, b=b, c=c: min_positive_root_paper_vectorized(a, b, c), repeats
+        )
         per_roots = numpy_roots_time(a, b, c, 500 if quick else 2000)
-        for method, seconds_per_cubic in (("lensaudit min_positive_root", ours / size),
-                                          ("paper Algorithm 1, vectorized", paper / size),
-                                          ("numpy.roots, one by one", per_roots)):
-            rows.append({
-                "model": model,
-                "method": method,
-                "cubics/s": 1 / seconds_per_cubic,
-                "vs lensaudit": (ours / size) / seconds_per_cubic,
-            })
+        for method, seconds_per_cubic in (
+            ("lensaudit min_positive_root", ours / size),
+            ("paper Algorithm 1, vectorized", paper / size),
+            ("numpy.roots, one by one", per_roots),
+        ):
+            rows.append(
+                {
+                    "model": model,
+                    "method": method,
+                    "cubics/s": 1 / seconds_per_cubic,
+                    "vs lensaudit": (ours / size) / seconds_per_cubic,
+                }
+            )
     return rows
