@@ -85,3 +85,45 @@ def test_an_unwritable_cache_directory_only_costs_speed(write_xml, tmp_path, mon
     monkeypatch.setenv("LENSAUDIT_CACHE_DIR", str(blocker / "cache"))
     path = write_xml(lens_xml('<distortion model="poly3" focal="10" k1="-0.1"/>'))
     assert len(run(path.parent, cache=True)) == 1
+
+
+def test_a_warm_audit_gives_the_same_columns_as_a_cold_one(bundled_db, cache_dir):
+    cold = run(bundled_db, cache=False)
+    run(bundled_db, cache=True)  # fills the cache
+    warm = run(bundled_db, cache=True)
+    assert warm._metric_columns is not None and "metrics" not in warm.__dict__  # from the cache
+    for name, values in cold.columns().items():
+        assert [("nan" if v != v else v) for v in warm.column(name)] == [
+            ("nan" if v != v else v) for v in values
+        ], name
+    assert warm.summary.to_dict() == cold.summary.to_dict()
+
+
+def test_a_changed_file_is_audited_again(write_xml, cache_dir):
+    path = write_xml(lens_xml('<distortion model="poly3" focal="10" k1="-0.1"/>'))
+    assert run(path.parent, cache=True).column("r_max")[0] != math.inf
+    run(path.parent, cache=True)
+    path.write_text(lens_xml('<distortion model="poly3" focal="10" k1="0.1"/>'))
+    os.utime(path, ns=(2, 2))
+    assert run(path.parent, cache=True).column("r_max") == [math.inf]
+
+
+def test_scan_from_a_warm_cache_does_not_import_numpy(tmp_path, cache_dir):
+    import subprocess
+    import sys
+
+    script = (
+        "import io, sys\n"
+        "from lensaudit.pipeline import run\n"
+        "from lensaudit.formats import writer\n"
+        "writer('csv')(run(cache=True), io.StringIO())\n"
+        "print('numpy' in sys.modules)\n"
+    )
+    env = dict(os.environ, LENSAUDIT_CACHE_DIR=str(cache_dir))
+    first = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
+    )
+    second = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
+    )
+    assert (first.stdout.strip(), second.stdout.strip()) == ("True", "False")

@@ -1,10 +1,14 @@
-"""A cache of parsed database files, so that an unchanged database is not parsed again.
+"""A cache of parsed and audited database files: an unchanged file is not read again.
 
-Entries of each file are stored with the file's size and modification time
-(the check git and make rely on); a file whose size or time changed is parsed
-again. The cache lives in ``$LENSAUDIT_CACHE_DIR``, else
-``$XDG_CACHE_HOME/lensaudit``, else ``~/.cache/lensaudit``; one cache file per
-set of input paths, written atomically. It is an optimization only: any
+Entries of each file, and their metrics once computed, are stored with the
+file's size and modification time (the check git and make rely on); a file
+whose size or time changed is parsed and audited again. Metrics are kept only
+for the code that computed them: the cache is keyed by a checksum of the
+modules that read and audit entries, as well as by lensaudit's version.
+
+The cache lives in ``$LENSAUDIT_CACHE_DIR``, else ``$XDG_CACHE_HOME/lensaudit``,
+else ``~/.cache/lensaudit``; one cache file per set of input paths, written
+atomically. It is an optimization only: any
 problem reading or writing it means parsing as if it were not there.
 
 The format is :mod:`marshal` of a few large objects per file: each column of
@@ -28,8 +32,31 @@ from .loader import DistortionEntry
 _FIELDS = tuple(f.name for f in fields(DistortionEntry))
 _NUMBERS = ("crop_factor", "aspect_ratio", "focal", "real_focal", "a", "b", "c", "k1", "k2")
 _TEXTS = ("maker", "lens", "type", "model", "status", "message")
-# Bumped with the package version and with the record layout.
-_FORMAT = f"lensaudit-parse-cache 2 {__version__} {' '.join(_FIELDS)}"
+_METRIC_NUMBERS = (
+    "r_max",
+    "d_max",
+    "r_corner",
+    "r_normalized",
+    "r_corner_paper",
+    "r_normalized_paper",
+)
+_METRIC_FLAGS = ("tail", "folds_in_image")  # small integers
+#: The modules whose code decides what a file's entries and metrics are.
+_CODE = ("loader.py", "normalizer.py", "solver.py", "metrics.py", "cache.py")
+
+
+def _code_checksum() -> int:
+    checksum = 0
+    for module in _CODE:
+        try:
+            checksum = zlib.crc32(Path(__file__).with_name(module).read_bytes(), checksum)
+        except OSError:  # not installed from source files: the version must do
+            pass
+    return checksum
+
+
+# Changes with the package version, the record layout and the auditing code.
+_FORMAT = f"lensaudit-cache 3 {__version__} {_code_checksum():08x} {' '.join(_FIELDS)}"
 _SEPARATOR = "\0"
 
 
@@ -61,6 +88,21 @@ def _unpack(packed: dict, name: str) -> list[DistortionEntry]:
     return list(map(DistortionEntry, *(columns[f] for f in _FIELDS)))
 
 
+def pack_metrics(columns: dict[str, list]) -> dict[str, bytes]:
+    """One file's metric columns (see :data:`lensaudit.pipeline.METRIC_COLUMNS`) as bytes."""
+    packed = {name: array("d", columns[name]).tobytes() for name in _METRIC_NUMBERS}
+    packed.update({name: array("b", columns[name]).tobytes() for name in _METRIC_FLAGS})
+    return packed
+
+
+def _unpack_metrics(packed: dict[str, bytes], count: int) -> dict[str, list]:
+    columns = {name: array("d", packed[name]).tolist() for name in _METRIC_NUMBERS}
+    columns.update({name: array("b", packed[name]).tolist() for name in _METRIC_FLAGS})
+    if any(len(values) != count for values in columns.values()):
+        raise ValueError("inconsistent cache record")
+    return columns
+
+
 CachedFile = tuple[list[DistortionEntry], str]
 
 
@@ -85,7 +127,8 @@ class ParseCache:
         # A checksum is enough: the entries inside are keyed by absolute path.
         name = f"parsed-{zlib.crc32(key.encode()):08x}.marshal"
         self.path = (directory or cache_dir()) / name
-        self._stored: dict[str, tuple[tuple[int, int], dict, str]] = {}
+        # path -> (size and time, entries, file error, metrics or None)
+        self._stored: dict[str, tuple[tuple[int, int], dict, str, dict | None]] = {}
         self._seen: set[str] = set()
         self._changed = False
         try:
@@ -114,9 +157,41 @@ class ParseCache:
     def put(
         self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
     ) -> None:
-        self._stored[str(path)] = (_stamp(stat), _pack(entries), error)
+        self._stored[str(path)] = (_stamp(stat), _pack(entries), error, None)
         self._seen.add(str(path))
         self._changed = True
+
+    def audited(self, targets: list[tuple[Path, str]]) -> list[CachedFile] | None:
+        """Entries and errors of every target, if all are unchanged and audited before."""
+        found = []
+        for path, name in targets:
+            path = path.resolve()
+            record = self._stored.get(str(path))
+            try:
+                if record is None or record[3] is None or tuple(record[0]) != _stamp(path.stat()):
+                    return None
+                found.append((_unpack(record[1], name), record[2]))
+            except (OSError, KeyError, TypeError, ValueError, AttributeError, IndexError):
+                return None
+            self._seen.add(str(path))
+        return found
+
+    def metrics(self, targets: list[tuple[Path, str]]) -> list[dict[str, list]] | None:
+        """The stored metric columns of every target (call after :meth:`audited`)."""
+        try:
+            return [
+                _unpack_metrics(record[3], record[1]["count"])
+                for record in (self._stored[str(path.resolve())] for path, _ in targets)
+            ]
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError):
+            return None
+
+    def put_metrics(self, path: Path, columns: dict[str, list]) -> None:
+        """Store the metrics of a file whose entries are stored."""
+        record = self._stored.get(str(path.resolve()))
+        if record is not None:
+            self._stored[str(path.resolve())] = (*record[:3], pack_metrics(columns))
+            self._changed = True
 
     def save(self) -> None:
         """Write the cache if anything changed; silently skipped when not possible.

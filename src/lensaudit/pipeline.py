@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import cached_property
 from operator import attrgetter
 from typing import TYPE_CHECKING, Any
@@ -67,19 +66,67 @@ FLOAT_COLUMNS = frozenset(COLUMNS) - {
 }  # fmt: skip
 
 _TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}  # metrics.TAIL_POSITIVE, ...
+_METRIC_FLOATS = (
+    "r_max",
+    "d_max",
+    "r_corner",
+    "r_normalized",
+    "r_corner_paper",
+    "r_normalized_paper",
+)
 
 
-@dataclass(frozen=True)
 class Audit:
-    """The audit of one database: its source, files, entries and metrics."""
+    """The audit of one database: its source, files, entries and metrics.
 
-    source: database.DatabaseSource
-    files: list[SourceFile]
-    entries: list[DistortionEntry]
-    metrics: metrics.Metrics
+    Metrics come as :class:`lensaudit.metrics.Metrics` (numpy arrays), or as
+    plain lists per metric column when read back from the cache; either form
+    gives the other on demand.
+    """
+
+    def __init__(
+        self,
+        source: database.DatabaseSource,
+        files: list[SourceFile],
+        entries: list[DistortionEntry],
+        metrics: metrics.Metrics | None = None,
+        metric_columns: dict[str, list] | None = None,
+    ) -> None:
+        if metrics is None and metric_columns is None:
+            raise ValueError("an Audit needs its metrics")
+        self.source = source
+        self.files = files
+        self.entries = entries
+        self._metric_columns = metric_columns
+        if metrics is not None:
+            self.__dict__["metrics"] = metrics
 
     def __len__(self) -> int:
         return len(self.entries)
+
+    @cached_property
+    def metrics(self) -> metrics.Metrics:
+        """The metrics as numpy arrays, one element per entry."""
+        import numpy as np
+
+        from .metrics import Metrics
+
+        columns = self._metric_columns
+        assert columns is not None
+        return Metrics(
+            **{name: np.array(columns[name], dtype=np.float64) for name in _METRIC_FLOATS},
+            tail=np.array(columns["tail"], dtype=np.int8),
+            folds_in_image=np.array(columns["folds_in_image"], dtype=bool),
+        )
+
+    def metric_columns(self) -> dict[str, list]:
+        """The metrics as lists: floats, ``tail`` as -1/0/1, ``folds_in_image`` as 0/1."""
+        if self._metric_columns is None:
+            m = self.metrics
+            self._metric_columns = {name: getattr(m, name).tolist() for name in _METRIC_FLOATS}
+            self._metric_columns["tail"] = m.tail.tolist()
+            self._metric_columns["folds_in_image"] = m.folds_in_image.astype(int).tolist()
+        return self._metric_columns
 
     @cached_property
     def audited(self) -> np.ndarray:
@@ -96,16 +143,15 @@ class Audit:
         """
         if name in ENTRY_COLUMNS:
             return list(map(attrgetter(name), self.entries))
+        values = self.metric_columns()[name]
         if name == "tail":
-            return [_TAIL_NAMES[t] for t in self.metrics.tail.tolist()]
+            return [_TAIL_NAMES[t] for t in values]
         if name == "folds_in_image":
+            statuses = map(attrgetter("status"), self.entries)
             return [
-                bool(f) if ok else None
-                for f, ok in zip(
-                    self.metrics.folds_in_image.tolist(), self.audited.tolist(), strict=True
-                )
+                bool(f) if s == STATUS_OK else None for f, s in zip(values, statuses, strict=True)
             ]
-        return getattr(self.metrics, name).tolist()
+        return list(values)
 
     def columns(self) -> dict[str, list[Any]]:
         """All output columns, in :data:`COLUMNS` order."""
@@ -153,14 +199,40 @@ def run(
         from .cache import ParseCache
 
         parse_cache = ParseCache([path for path, _ in targets])
+        audited = parse_cache.audited(targets)
+        stored = parse_cache.metrics(targets) if audited is not None else None
+        if audited is not None and stored is not None:
+            # Nothing changed since the last audit: no parsing, no numpy.
+            return _from_cache(source, targets, audited, stored)
     # libxml2 parses without holding the GIL: read the files while numpy imports.
     pending = loader.load_files_in_background(targets, parse_cache)
     from . import metrics  # noqa: F401  (the import is the point)
 
     loaded = pending()
+    audit = audit_entries(loaded.entries, source, loaded.files)
     if parse_cache is not None:
+        columns = audit.metric_columns()
+        start = 0
+        for file in loaded.files:
+            end = start + file.entries
+            parse_cache.put_metrics(file.path, {k: v[start:end] for k, v in columns.items()})
+            start = end
         parse_cache.save()
-    return audit_entries(loaded.entries, source, loaded.files)
+    return audit
+
+
+def _from_cache(source, targets, audited, stored) -> Audit:
+    """An audit put together from the cache's entries and metrics, file by file."""
+    files, entries = [], []
+    columns: dict[str, list] = {}
+    for (path, name), (file_entries, error), file_columns in zip(
+        targets, audited, stored, strict=True
+    ):
+        files.append(SourceFile(name, path.resolve(), len(file_entries), error))
+        entries.extend(file_entries)
+        for key, values in file_columns.items():
+            columns.setdefault(key, []).extend(values)
+    return Audit(source, files, entries, metric_columns=columns)
 
 
 def audit_entries(
