@@ -2,9 +2,9 @@
 
 Both run as fresh processes, in turns, on the database bundled with
 lensfunpy: liblensfun's own load is `python -c "import lensfunpy;
-lensfunpy.Database()"`. "cold" scans parse every file (--no-cache); "warm"
-scans find the files unchanged in lensaudit's parse cache (a fresh cache
-directory, primed once). Times are medians; memory is the peak resident size.
+lensfunpy.Database()"`. "cold" scans parse and audit every file (--no-cache);
+"warm" scans find the files unchanged in lensaudit's cache of parsed and
+audited files (a fresh cache directory, primed once). Times are medians; memory is the peak resident size.
 In-process rows time the same work without interpreter start-up and imports.
 """
 
@@ -77,7 +77,7 @@ def run(quick: bool) -> list[dict]:
         commands = {
             "liblensfun load (lensfunpy.Database)": BASELINE,
             "lensaudit scan, cold (--no-cache)": scan + ["--no-cache"],
-            "lensaudit scan, warm (parse cache)": scan,
+            "lensaudit scan, warm (cache)": scan,
         }
         wall_time(scan, env)  # primes the cache
         times: dict[str, list[float]] = {name: [] for name in commands}
