@@ -46,7 +46,7 @@ import numpy as np
 
 from . import __version__, loader, metrics
 from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
-from .pipeline import FLOAT_COLUMNS
+from .pipeline import COLUMNS, FLOAT_COLUMNS
 
 if TYPE_CHECKING:
     import pandas
@@ -99,31 +99,10 @@ HISTORY_COLUMNS = (
 
 #: Columns of ``introduced.csv``: one row per entry of the newest revision
 #: with a finite r_max, and the commit that introduced its coefficients.
-INTRODUCED_COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "a",
-    "b",
-    "c",
-    "k1",
-    "k2",
-    "r_max",
-    "d_max",
-    "r_normalized",
-    "r_normalized_paper",
-    "folds_in_image",
-    "commit",
-    "date",
-    "author",
-    "subject",
-)
+INTRODUCED_COLUMNS = tuple(
+    name for name in COLUMNS
+    if name not in {"real_focal", "tail", "r_corner", "r_corner_paper", "status", "message"}
+) + ("commit", "date", "author", "subject")  # fmt: skip
 
 _FLOAT_INTRODUCED = FLOAT_COLUMNS & frozenset(INTRODUCED_COLUMNS)
 
