@@ -4,7 +4,8 @@ Both run as fresh processes, in turns, on the database bundled with
 lensfunpy: liblensfun's own load is `python -c "import lensfunpy;
 lensfunpy.Database()"`. "cold" scans parse and audit every file (--no-cache);
 "warm" scans find the files unchanged in lensaudit's cache of parsed and
-audited files (a fresh cache directory, primed once). Times are medians; memory is the peak resident size.
+audited files (a fresh cache directory, primed once). Times are medians;
+memory is the peak resident size.
 In-process rows time the same work without interpreter start-up and imports.
 """
 

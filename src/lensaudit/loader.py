@@ -65,7 +65,8 @@ class DistortionEntry:
 
     Coefficients are the raw model coefficients (``a b c`` for ptlens, ``k1``
     for poly3, ``k1 k2`` for poly5); coefficients the model does not use are
-    NaN. ``real_focal`` is NaN when the attribute is absent. Lengths are in
+    NaN. ``real_focal`` is NaN when neither a ``real-focal`` attribute nor a
+    ``<real-focal-length>`` for its focal length gives it. Lengths are in
     millimetres; crop factor and aspect ratio are plain numbers.
     """
 
