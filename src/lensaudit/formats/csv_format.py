@@ -31,18 +31,27 @@ def text_column(values: list) -> list[str]:
     return texts
 
 
+#: Rows formatted at a time: the text of a whole database at once costs more
+#: memory, and in a fresh process memory costs time.
+CHUNK_ROWS = 256
+
+
+def _fields(name: str, values: list) -> list[str]:
+    if name in FLOAT_COLUMNS:
+        return format_floats(values)
+    if name == "folds_in_image":
+        return [_BOOLEAN[v] for v in values]
+    if name == "line":
+        return list(map(str, values))
+    return text_column(values)
+
+
 def write(audit: Audit, stream: TextIO) -> None:
-    columns = []
-    for name in COLUMNS:
-        values = audit.column(name)
-        if name in FLOAT_COLUMNS:
-            columns.append(format_floats(values))
-        elif name == "folds_in_image":
-            columns.append([_BOOLEAN[v] for v in values])
-        elif name == "line":
-            columns.append(list(map(str, values)))
-        else:
-            columns.append(text_column(values))
+    columns = [audit.column(name) for name in COLUMNS]
     stream.write(",".join(COLUMNS) + "\n")
-    if columns[0]:
-        stream.write("\n".join(map(",".join, zip(*columns, strict=True))) + "\n")
+    for start in range(0, len(audit), CHUNK_ROWS):
+        fields = [
+            _fields(name, values[start : start + CHUNK_ROWS])
+            for name, values in zip(COLUMNS, columns, strict=True)
+        ]
+        stream.write("\n".join(map(",".join, zip(*fields, strict=True))) + "\n")
