@@ -28,18 +28,11 @@ from pathlib import Path
 
 from . import __version__
 from .loader import DistortionEntry
+from .pipeline import METRIC_FLOAT_COLUMNS
 
 _FIELDS = tuple(f.name for f in fields(DistortionEntry))
 _NUMBERS = ("crop_factor", "aspect_ratio", "focal", "real_focal", "a", "b", "c", "k1", "k2")
 _TEXTS = ("maker", "lens", "type", "model", "status", "message")
-_METRIC_NUMBERS = (
-    "r_max",
-    "d_max",
-    "r_corner",
-    "r_normalized",
-    "r_corner_paper",
-    "r_normalized_paper",
-)
 _METRIC_FLAGS = ("tail", "folds_in_image")  # small integers
 #: The modules whose code decides what a file's entries and metrics are.
 _CODE = ("loader.py", "normalizer.py", "solver.py", "metrics.py", "cache.py")
@@ -56,7 +49,10 @@ def _code_checksum() -> int:
 
 
 # Changes with the package version, the record layout and the auditing code.
-_FORMAT = f"lensaudit-cache 3 {__version__} {_code_checksum():08x} {' '.join(_FIELDS)}"
+_FORMAT = (
+    f"lensaudit-cache 3 {__version__} {_code_checksum():08x} {' '.join(_FIELDS)} "
+    f"{' '.join(METRIC_FLOAT_COLUMNS)}"
+)
 _SEPARATOR = "\0"
 
 
@@ -90,13 +86,13 @@ def _unpack(packed: dict, name: str) -> list[DistortionEntry]:
 
 def pack_metrics(columns: dict[str, list]) -> dict[str, bytes]:
     """One file's metric columns (see :data:`lensaudit.pipeline.METRIC_COLUMNS`) as bytes."""
-    packed = {name: array("d", columns[name]).tobytes() for name in _METRIC_NUMBERS}
+    packed = {name: array("d", columns[name]).tobytes() for name in METRIC_FLOAT_COLUMNS}
     packed.update({name: array("b", columns[name]).tobytes() for name in _METRIC_FLAGS})
     return packed
 
 
 def _unpack_metrics(packed: dict[str, bytes], count: int) -> dict[str, list]:
-    columns = {name: array("d", packed[name]).tolist() for name in _METRIC_NUMBERS}
+    columns = {name: array("d", packed[name]).tolist() for name in METRIC_FLOAT_COLUMNS}
     columns.update({name: array("b", packed[name]).tolist() for name in _METRIC_FLAGS})
     if any(len(values) != count for values in columns.values()):
         raise ValueError("inconsistent cache record")

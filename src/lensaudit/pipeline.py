@@ -66,13 +66,9 @@ FLOAT_COLUMNS = frozenset(COLUMNS) - {
 }  # fmt: skip
 
 _TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}  # metrics.TAIL_POSITIVE, ...
-_METRIC_FLOATS = (
-    "r_max",
-    "d_max",
-    "r_corner",
-    "r_normalized",
-    "r_corner_paper",
-    "r_normalized_paper",
+#: The metric columns that hold floats (the others: tail, folds_in_image).
+METRIC_FLOAT_COLUMNS = tuple(
+    name for name in METRIC_COLUMNS if name not in ("tail", "folds_in_image")
 )
 
 
@@ -114,7 +110,7 @@ class Audit:
         columns = self._metric_columns
         assert columns is not None
         return Metrics(
-            **{name: np.array(columns[name], dtype=np.float64) for name in _METRIC_FLOATS},
+            **{name: np.array(columns[name], dtype=np.float64) for name in METRIC_FLOAT_COLUMNS},
             tail=np.array(columns["tail"], dtype=np.int8),
             folds_in_image=np.array(columns["folds_in_image"], dtype=bool),
         )
@@ -123,7 +119,9 @@ class Audit:
         """The metrics as lists: floats, ``tail`` as -1/0/1, ``folds_in_image`` as 0/1."""
         if self._metric_columns is None:
             m = self.metrics
-            self._metric_columns = {name: getattr(m, name).tolist() for name in _METRIC_FLOATS}
+            self._metric_columns = {
+                name: getattr(m, name).tolist() for name in METRIC_FLOAT_COLUMNS
+            }
             self._metric_columns["tail"] = m.tail.tolist()
             self._metric_columns["folds_in_image"] = m.folds_in_image.astype(int).tolist()
         return self._metric_columns
