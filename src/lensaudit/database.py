@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from dataclasses import dataclass
 from importlib.util import find_spec
 from pathlib import Path
@@ -64,16 +65,121 @@ def lensfunpy_version() -> str:
 
 
 def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> DatabaseSource:
-    """The database to audit: ``paths`` if given, else lensfunpy's bundled one."""
+    """The database to audit.
+
+    ``paths`` if given, where a Lensfun checkout (or its ``data`` directory)
+    stands for its ``data/db``; without paths, the database of the Lensfun
+    checkout the working directory is in, else lensfunpy's bundled one.
+    """
     if paths:
-        resolved = tuple(Path(p) for p in paths)
-        return DatabaseSource(resolved, ", ".join(str(p) for p in resolved))
+        given = tuple(Path(p) for p in paths)
+        resolved = tuple(database_directory(p) for p in given)
+        return DatabaseSource(resolved, ", ".join(map(_describe, given, resolved)))
+    here = enclosing_database()
+    if here is not None:
+        label = _describe(here, here, "the Lensfun checkout around the working directory")
+        return DatabaseSource((here,), label)
     path = bundled_database_path()
     return DatabaseSource(
         (path,),
         f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
         bundled=True,
     )
+
+
+#: Where a Lensfun checkout keeps its database, relative to the checkout.
+CHECKOUT_DATABASE = Path("data", "db")
+
+
+def is_database_directory(path: Path) -> bool:
+    """Whether ``path`` is a directory holding Lensfun database files.
+
+    A file counts when its first kilobyte names the ``<lensdatabase>`` root
+    element; only the first few ``*.xml`` files are looked at.
+    """
+    try:
+        candidates = sorted(p for p in os.listdir(path) if p.lower().endswith(".xml"))[:3]
+    except OSError:
+        return False
+    for name in candidates:
+        try:
+            with open(path / name, "rb") as stream:
+                if b"<lensdatabase" in stream.read(1024):
+                    return True
+        except OSError:
+            continue
+    return False
+
+
+def database_directory(path: Path) -> Path:
+    """The database a path designates: ``data/db`` of a Lensfun checkout, else ``path``.
+
+    A checkout is recognized by its ``data/db`` holding Lensfun XML, so that
+    ``lensaudit scan lensfun/`` audits a clone of the Lensfun repository (and
+    ``lensfun/data`` works too). Anything else is returned unchanged.
+    """
+    for candidate in (path / CHECKOUT_DATABASE, path / CHECKOUT_DATABASE.name):
+        if is_database_directory(candidate):
+            return candidate
+    return path
+
+
+def enclosing_database(start: Path | None = None) -> Path | None:
+    """``data/db`` of the Lensfun checkout that ``start`` (the working directory) is in.
+
+    Looks at ``start`` and its parents; None outside a Lensfun checkout.
+    """
+    try:
+        start = (start or Path.cwd()).resolve()
+    except OSError:  # the working directory was removed
+        return None
+    for directory in (start, *start.parents):
+        if directory.parts[-2:] == CHECKOUT_DATABASE.parts and is_database_directory(directory):
+            return directory
+        if is_database_directory(directory / CHECKOUT_DATABASE):
+            return directory / CHECKOUT_DATABASE
+    return None
+
+
+def git_commit(directory: Path) -> str:
+    """Short id of the commit checked out in the git repository holding ``directory``.
+
+    Adds ``+changes`` when the directory differs from that commit; "" when
+    ``directory`` is not in a git repository or git is not available.
+    """
+    import subprocess
+
+    environment = {**os.environ, "GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
+    try:
+        commit = subprocess.run(
+            ["git", "-C", os.fspath(directory), "rev-parse", "--short=10", "HEAD"],
+            capture_output=True, env=environment, timeout=10, check=True,
+        ).stdout.decode("ascii").strip()  # fmt: skip
+        changed = subprocess.run(
+            ["git", "-C", os.fspath(directory), "status", "--porcelain", "--", "."],
+            capture_output=True, env=environment, timeout=30, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError, UnicodeDecodeError):
+        return ""
+    return commit + ("+changes" if changed else "")
+
+
+def display_path(path: str | os.PathLike[str]) -> str:
+    """A path as printed: bytes that are not valid in the file system's
+    encoding (a file name that is not UTF-8) as backslash escapes."""
+    return os.fsencode(path).decode(sys.getfilesystemencoding(), "backslashreplace")
+
+
+def _describe(given: Path, directory: Path, origin: str = "") -> str:
+    """How a database is named in output: the path, and where it comes from."""
+    if directory != given:
+        origin = f"Lensfun checkout: {display_path(directory)}"
+    text = display_path(given) + (f" ({origin})" if origin else "")
+    if directory.parts[-2:] == CHECKOUT_DATABASE.parts and directory.is_dir():
+        commit = git_commit(directory)
+        if commit:
+            text += f" at git commit {commit}"
+    return text
 
 
 def timestamp(directory: Path) -> str:
