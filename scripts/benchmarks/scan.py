@@ -3,8 +3,10 @@
 Both run as fresh processes, in turns, on the database bundled with
 lensfunpy: liblensfun's own load is `python -c "import lensfunpy;
 lensfunpy.Database()"`. "cold" scans parse and audit every file (--no-cache);
-"warm" scans find the files unchanged in lensaudit's cache of parsed and
-audited files (a fresh cache directory, primed once). Times are medians;
+"first" scans do the same with an empty cache directory each time, and write
+the cache; "warm" scans find the files unchanged in lensaudit's cache of
+parsed and audited files (a fresh cache directory, primed once), which still
+reads and hashes every file. Times are medians;
 memory is the peak resident size.
 In-process rows time the same work without interpreter start-up and imports.
 """
@@ -31,13 +33,21 @@ def scan_command() -> list[str]:
     return prefix + ["scan", "--format", "csv", "-o", os.devnull]
 
 
-def wall_time(command: list[str], env: dict[str, str]) -> float:
+def wall_time(command: list[str], env: dict[str, str], empty_cache: bool = False) -> float:
+    """Seconds one run of ``command`` takes; ``empty_cache`` gives it a new cache directory."""
+    if empty_cache:
+        with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
+            return wall_time(command, dict(env, LENSAUDIT_CACHE_DIR=fresh))
     start = time.perf_counter()
     subprocess.run(command, check=True, env=env, stdout=subprocess.DEVNULL)
     return time.perf_counter() - start
 
 
-def peak_memory_mb(command: list[str], env: dict[str, str]) -> float:
+def peak_memory_mb(command: list[str], env: dict[str, str], empty_cache: bool = False) -> float:
+    """Peak resident size of one run of ``command``, in MB."""
+    if empty_cache:
+        with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
+            return peak_memory_mb(command, dict(env, LENSAUDIT_CACHE_DIR=fresh))
     probe = (
         "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, "
         "stdout=subprocess.DEVNULL); "
@@ -54,9 +64,16 @@ def in_process(repeats: int) -> dict[str, float]:
 
     from lensaudit.pipeline import run
 
-    times: dict[str, list[float]] = {"liblensfun": [], "cold": [], "warm": []}
+    times: dict[str, list[float]] = {"liblensfun": [], "cold": [], "first": [], "warm": []}
+    primed = os.environ["LENSAUDIT_CACHE_DIR"]
     run(cache=True)
     for _ in range(repeats):
+        with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
+            os.environ["LENSAUDIT_CACHE_DIR"] = fresh
+            start = time.perf_counter()
+            run(cache=True)
+            times["first"].append(time.perf_counter() - start)
+            os.environ["LENSAUDIT_CACHE_DIR"] = primed
         start = time.perf_counter()
         lensfunpy.Database()
         times["liblensfun"].append(time.perf_counter() - start)
@@ -78,13 +95,14 @@ def run(quick: bool) -> list[dict]:
         commands = {
             "liblensfun load (lensfunpy.Database)": BASELINE,
             "lensaudit scan, cold (--no-cache)": scan + ["--no-cache"],
+            "lensaudit scan, first (empty cache)": scan,
             "lensaudit scan, warm (cache)": scan,
         }
         wall_time(scan, env)  # primes the cache
         times: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(repeats):
             for name, command in commands.items():
-                times[name].append(wall_time(command, env))
+                times[name].append(wall_time(command, env, empty_cache="first" in name))
         medians = {name: statistics.median(values) for name, values in times.items()}
         baseline = medians["liblensfun load (lensfunpy.Database)"]
         rows = [
@@ -92,7 +110,7 @@ def run(quick: bool) -> list[dict]:
                 "run": name,
                 "median s": medians[name],
                 "vs liblensfun": medians[name] / baseline,
-                "peak MB": peak_memory_mb(command, env),
+                "peak MB": peak_memory_mb(command, env, empty_cache="first" in name),
             }
             for name, command in commands.items()
         ]
@@ -101,6 +119,7 @@ def run(quick: bool) -> list[dict]:
         for name, label in (
             ("liblensfun", "in-process: liblensfun load"),
             ("cold", "in-process: lensaudit load + audit, cold"),
+            ("first", "in-process: lensaudit load + audit, first (empty cache)"),
             ("warm", "in-process: lensaudit load + audit, warm"),
         ):
             rows.append(
