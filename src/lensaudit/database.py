@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import os
 import re
-import sys
+from collections.abc import Iterable
 from dataclasses import dataclass
 from importlib.util import find_spec
 from pathlib import Path
 
-from .loader import LoadError
+from .loader import LoadError, display_path
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> Dat
     checkout the working directory is in, else lensfunpy's bundled one.
     """
     if paths:
-        given = tuple(Path(p) for p in paths)
+        given = _unique(Path(p) for p in paths)
         resolved = tuple(database_directory(p) for p in given)
         return DatabaseSource(resolved, ", ".join(map(_describe, given, resolved)))
     here = enclosing_database()
@@ -85,6 +85,14 @@ def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> Dat
         f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
         bundled=True,
     )
+
+
+def _unique(paths: Iterable[Path]) -> tuple[Path, ...]:
+    """Paths without repeats: a database named twice is audited once."""
+    seen: dict[str, Path] = {}
+    for path in paths:
+        seen.setdefault(os.path.realpath(path), path)
+    return tuple(seen.values())
 
 
 #: Where a Lensfun checkout keeps its database, relative to the checkout.
@@ -164,12 +172,6 @@ def git_commit(directory: Path) -> str:
     return commit + ("+changes" if changed else "")
 
 
-def display_path(path: str | os.PathLike[str]) -> str:
-    """A path as printed: bytes that are not valid in the file system's
-    encoding (a file name that is not UTF-8) as backslash escapes."""
-    return os.fsencode(path).decode(sys.getfilesystemencoding(), "backslashreplace")
-
-
 def _describe(given: Path, directory: Path, origin: str = "") -> str:
     """How a database is named in output: the path, and where it comes from."""
     if directory != given:
@@ -196,6 +198,6 @@ def content_hash(files: list[Path]) -> str:
 
     digest = hashlib.sha256()
     for file in files:
-        digest.update(file.name.encode() + b"\0")
+        digest.update(os.fsencode(file.name) + b"\0")
         digest.update(file.read_bytes())
     return digest.hexdigest()

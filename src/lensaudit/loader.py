@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
+import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -43,6 +45,12 @@ STATUS_BAD_VALUE = "bad_value"
 STATUS_NO_LENS = "no_lens"
 STATUS_XML_ERROR = "xml_error"
 STATUS_UNREADABLE = "unreadable"
+STATUS_NOT_DATABASE = "not_database"
+
+#: The root element of a Lensfun database file.
+DATABASE_ROOT = "lensdatabase"
+#: Larger files are not read: Lensfun's largest database file is about 2 MB.
+MAX_FILE_BYTES = 256 << 20
 
 NAN = math.nan
 
@@ -143,7 +151,10 @@ def parse_aspect_ratio(text: str) -> float:
     """Parse ``N:M`` (``4:3``) or a decimal (``1.333``) aspect ratio."""
     numerator, sep, denominator = text.partition(":")
     if sep:
-        value = parse_number(numerator) / parse_number(denominator)
+        divisor = parse_number(denominator)
+        if divisor == 0:
+            raise ValueError(f"{_quoted(text)} divides by zero")
+        value = parse_number(numerator) / divisor
     else:
         value = parse_number(text)
     if not value > 0 or not math.isfinite(value):
@@ -166,16 +177,24 @@ def make_parser() -> etree.XMLParser:
 
 
 def _child_text(element: etree._Element, tag: str) -> str | None:
-    """Text of the last child ``tag`` without a ``lang`` attribute.
+    """Text content of the last child ``tag`` without a ``lang`` attribute.
 
     The last one, because that is the one liblensfun keeps when a lens
-    repeats an element (two untranslated ``<model>`` names, say).
+    repeats an element (two untranslated ``<model>`` names, say). The whole
+    text content, as any XML reader gives it: ``1<!-- note -->.5`` is 1.5.
     """
     text = None
     for child in element.iterchildren(tag):
         if child.get("lang") is None:
-            text = (child.text or "").strip()
+            text = _text(child)
     return text
+
+
+def _text(element: etree._Element) -> str:
+    """An element's text content, stripped (comments and PIs left out)."""
+    if len(element) == 0:  # no child, comment or PI: the common case
+        return (element.text or "").strip()
+    return "".join(element.itertext()).strip()
 
 
 @dataclass(slots=True)
@@ -236,7 +255,7 @@ def _lens_context(lens: etree._Element | None) -> _LensContext:
     problems = []
     maker = _child_text(lens, "maker") or ""
     model = _child_text(lens, "model") or ""
-    mounts = tuple((m.text or "").strip() for m in lens.iterchildren("mount"))
+    mounts = tuple(map(_text, lens.iterchildren("mount")))
     lens_type = _child_text(lens, "type") or DEFAULT_LENS_TYPE
     crop_factor = DEFAULT_CROP_FACTOR
     crop_text = _child_text(lens, "cropfactor")
@@ -359,7 +378,8 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
     focal_text = get("focal")
     real_text = get("real-focal")
     if names is not None and focal_text is not None and not context.problem:
-        texts = [focal_text, real_text or "1"] + [get(n, "0") for n in names]
+        texts = [focal_text, "1" if real_text is None else real_text]
+        texts += [get(n, "0") for n in names]
         joined = "".join(texts)
         # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
         if joined.isascii() and "_" not in joined:
@@ -510,7 +530,43 @@ def read_bytes(data: bytes, name: str) -> tuple[list[DistortionEntry], str]:
         root = etree.fromstring(data, make_parser())
     except etree.XMLSyntaxError as error:
         return _unparsable(data, name, error)
+    if b"xmlns" in data:
+        _use_local_names(root)
+    if root.tag != DATABASE_ROOT:
+        return _not_a_database(root, name)
     return list(entries_from_tree(root, name)), ""
+
+
+def _use_local_names(root: etree._Element) -> None:
+    """Drop namespaces from element names, in place.
+
+    liblensfun's parser does not know namespaces: to it, an element in a
+    default namespace (``<lensdatabase xmlns="...">``) has its plain name.
+    """
+    for element in root.iter():
+        tag = element.tag
+        if isinstance(tag, str) and tag.startswith("{"):
+            element.tag = tag.partition("}")[2]
+
+
+def _not_a_database(root: etree._Element, name: str) -> tuple[list[DistortionEntry], str]:
+    """The records of a well-formed file whose root is not ``<lensdatabase>``.
+
+    One record for the file, then one for each ``<distortion>`` in it, so
+    that none is lost; none of them is audited.
+    """
+    tag = root.tag if isinstance(root.tag, str) else "?"
+    message = f"root element is <{_clip(tag)}>, not <{DATABASE_ROOT}>: not a Lensfun database file"
+    head = _error_entry(name, root.sourceline or 1, STATUS_NOT_DATABASE, message)
+    inside = [
+        _replace_status(entry, STATUS_NOT_DATABASE, message)
+        for entry in entries_from_tree(root, name)
+    ]
+    return [head, *inside], message
+
+
+def _clip(text: str, limit: int = 40) -> str:
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _unparsable(
@@ -535,12 +591,46 @@ def _syntax_error_position(error: etree.XMLSyntaxError) -> tuple[int, int, str]:
 
 
 def xml_files(path: Path) -> list[Path]:
-    """The ``*.xml`` files directly inside a database directory, sorted by name."""
-    return sorted(p for p in path.iterdir() if p.suffix.lower() == ".xml" and p.is_file())
+    """The ``*.xml`` files directly inside a database directory, sorted by name.
+
+    Anything so named but a directory counts: a FIFO or a device named
+    ``*.xml`` is then reported as unreadable rather than silently skipped.
+    Raises ``OSError`` when the directory cannot be listed.
+    """
+    with os.scandir(path) as found:
+        return sorted(
+            path / item.name
+            for item in found
+            if item.name.lower().endswith(".xml") and not item.is_dir()
+        )
 
 
-def _display_name(file: Path, given: Path) -> str:
-    return os.path.relpath(file, given) if given.is_dir() else str(given)
+def display_path(path: str | os.PathLike[str]) -> str:
+    """A path as printed: bytes that are not valid in the file system's
+    encoding (a file name that is not UTF-8) as backslash escapes."""
+    return os.fsencode(path).decode(sys.getfilesystemencoding(), "backslashreplace")
+
+
+def _reason(error: OSError) -> str:
+    return error.strerror or str(error)
+
+
+def read_file(path: str | os.PathLike[str]) -> bytes:
+    """The bytes of a regular file, read without ever blocking.
+
+    Raises ``OSError`` for a FIFO, device, socket or directory (opened
+    non-blocking and refused, so that a FIFO cannot hang the run), and for a
+    file larger than :data:`MAX_FILE_BYTES`.
+    """
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    descriptor = os.open(path, flags | getattr(os, "O_CLOEXEC", 0))
+    with open(descriptor, "rb", closefd=True) as stream:
+        info = os.fstat(descriptor)
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(0, "not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise OSError(0, f"larger than {MAX_FILE_BYTES >> 20} MiB, not a database file")
+        return stream.read()
 
 
 class EntryCache(Protocol):
@@ -567,16 +657,36 @@ def expand(
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     targets: list[tuple[Path, str]] = []
+    seen: set[str] = set()
     for given in map(Path, paths):
-        if given.is_dir():
-            files = xml_files(given)
+        shown = display_path(given)
+        try:
+            mode = os.stat(given).st_mode
+        except FileNotFoundError:
+            raise LoadError(f"{shown}: no such file or directory") from None
+        except OSError as error:
+            raise LoadError(f"{shown}: {_reason(error)}") from None
+        if stat.S_ISDIR(mode):
+            try:
+                files = xml_files(given)
+            except OSError as error:
+                raise LoadError(f"{shown}: cannot list directory: {_reason(error)}") from None
             if not files:
-                raise LoadError(f"{given}: directory holds no *.xml files")
-            targets.extend((file, _display_name(file, given)) for file in files)
-        elif given.exists():
-            targets.append((given, str(given)))
+                raise LoadError(
+                    f"{shown}: directory holds no *.xml files (give a Lensfun database "
+                    "directory, a Lensfun checkout, or XML files)"
+                )
+            found = [(file, display_path(os.path.relpath(file, given))) for file in files]
+        elif stat.S_ISREG(mode):
+            found = [(given, shown)]
         else:
-            raise LoadError(f"{given}: no such file or directory")
+            raise LoadError(f"{shown}: not a regular file or directory")
+        for file, name in found:
+            # The same file named twice (db and db/x.xml, or a link) is read once.
+            real = os.path.realpath(file)
+            if real not in seen:
+                seen.add(real)
+                targets.append((file, name))
     return targets
 
 
@@ -628,16 +738,18 @@ def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = N
     for path, name in targets:
         path = path.resolve()
         try:
-            stat = path.stat()
-            cached = cache.get(path, stat, name) if cache is not None else None
+            info = path.stat()
+            if not stat.S_ISREG(info.st_mode):
+                raise OSError(0, "not a regular file")
+            cached = cache.get(path, info, name) if cache is not None else None
             if cached is not None:
                 entries, error = cached
             else:
-                entries, error = read_bytes(path.read_bytes(), name)
+                entries, error = read_bytes(read_file(path), name)
                 if cache is not None:
-                    cache.put(path, stat, entries, error)
+                    cache.put(path, info, entries, error)
         except OSError as os_error:
-            error = f"cannot read file: {os_error.strerror or os_error}"
+            error = f"cannot read file: {_reason(os_error)}"
             entries = [_error_entry(name, 0, STATUS_UNREADABLE, error)]
         result.files.append(SourceFile(name, path, len(entries), error))
         result.entries.extend(entries)

@@ -45,7 +45,8 @@ def lines(audit: Audit) -> list[str]:
     summary = audit.summary
     out = [
         f"lensaudit {__version__}: {audit.source.label}",
-        f"{summary.files} files, {summary.entries} distortion entries, {summary.audited} audited",
+        f"{summary.files} file{'s' if summary.files != 1 else ''}, "
+        f"{summary.entries} distortion entries, {summary.audited} audited",
         "",
     ]
 
