@@ -324,3 +324,10 @@ def test_any_file_name_is_scanned_and_reported_with_escapes(tmp_path_factory, st
     shown = (stem + b".xml").decode(sys.getfilesystemencoding(), "backslashreplace")
     assert found and {row["file"] for row in found} == {shown}
     assert all(row["status"] == "ok" for row in found)
+
+
+@pytest.mark.parametrize("command", ["scan", "check", "report", "history"])
+def test_every_command_names_a_too_long_path_in_one_line(tmp_path, command):
+    name = str(tmp_path / ("y" * 300))
+    extra = ["-o", str(tmp_path / "out")] if command in ("report", "history") else []
+    assert_one_line_error(run_cli(command, name, *extra), "File name too long")

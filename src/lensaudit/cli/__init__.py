@@ -40,6 +40,20 @@ class LazyGroup(click.Group):
         module = import_module(f"{__name__}.{SUBCOMMANDS[cmd_name][0]}")
         return getattr(module, cmd_name)
 
+    def invoke(self, ctx: click.Context):
+        # The last line of defence: a file-system problem that a command did
+        # not foresee (a path too long, a permission) is one line, not a traceback.
+        try:
+            return super().invoke(ctx)
+        except OSError as error:
+            if isinstance(error, BrokenPipeError):
+                raise
+            from ..loader import display_path
+
+            where = f"{display_path(error.filename)}: " if error.filename is not None else ""
+            click.echo(f"lensaudit: error: {where}{error.strerror or error}", err=True)
+            ctx.exit(2)
+
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         # Listing help must not import every subcommand: use the short texts here.
         rows = [(name, SUBCOMMANDS[name][1]) for name in self.list_commands(ctx)]
