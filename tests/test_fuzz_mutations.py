@@ -9,6 +9,9 @@ The rule, per file (``loader.read_bytes``, ``lensaudit scan``, ``lensaudit check
   convention), and no ``xml_error`` record. ``check`` counts them all and
   reports each record that could not be audited with exactly one input
   finding at its line.
+- A well-formed file whose root element is not ``<lensdatabase>`` yields one
+  file-level ``not_database`` record followed by one record per
+  ``<distortion>`` element, all ``not_database``.
 - A file that is not well-formed yields one file-level ``xml_error`` record
   (no model, no focal) followed by one record for each ``<distortion>``
   element libxml2's recovery mode still finds, each marked ``xml_error``.
@@ -16,7 +19,7 @@ The rule, per file (``loader.read_bytes``, ``lensaudit scan``, ``lensaudit check
   a column, and counts the salvaged records.
 
 Hypothesis runs a fixed, derandomized set of examples, so that a run is
-reproducible and bounded.
+reproducible and bounded. Any warning (a numpy RuntimeWarning, say) fails a test.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import xml.parsers.expat
 from collections import Counter
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -36,6 +40,8 @@ from lxml import etree
 from lensaudit import loader
 from lensaudit.cli import main
 from lensaudit.database import bundled_database_path
+
+pytestmark = pytest.mark.filterwarnings("error")
 
 #: Real files of the bundled database: small, with tca and vignetting, one that folds.
 FILES = ("6x6.xml", "actioncams.xml", "compact-samsung.xml", "slr-vivitar.xml")
@@ -166,6 +172,14 @@ def truncate(draw, rng, data: bytes) -> bytes:
     return data[: rng.randint(0, len(data))]
 
 
+def flip_bits(draw, rng, data: bytes) -> bytes:
+    """Flip one bit in each of a few random bytes, as a bad disk or transfer does."""
+    mutable = bytearray(data)
+    for _ in range(draw(st.integers(1, 4)) if mutable else 0):
+        mutable[rng.randrange(len(mutable))] ^= 1 << rng.randrange(8)
+    return bytes(mutable)
+
+
 MUTATIONS = (
     delete_characters,
     duplicate_characters,
@@ -176,6 +190,7 @@ MUTATIONS = (
     change_value,
     change_value,
     truncate,
+    flip_bits,
 )
 
 
@@ -206,12 +221,16 @@ def _start_tag_end_line(data: bytes, offset: int, line: int) -> int:
     raise AssertionError("start tag without end in a well-formed document")
 
 
-def expat_distortion_lines(data: bytes) -> list[int] | None:
-    """Lines of the <distortion> elements per expat, or None if not well-formed."""
+def expat_root_and_distortion_lines(data: bytes) -> tuple[str, list[int]] | None:
+    """Local name of the root element and lines of the <distortion> elements per
+    expat, or None if not well-formed."""
     parser = xml.parsers.expat.ParserCreate()
     lines: list[int] = []
+    roots: list[str] = []
 
     def start(name, attributes):
+        if not roots:
+            roots.append(name.rpartition(":")[2])
         if name == "distortion":
             lines.append(
                 _start_tag_end_line(data, parser.CurrentByteIndex, parser.CurrentLineNumber)
@@ -222,7 +241,13 @@ def expat_distortion_lines(data: bytes) -> list[int] | None:
         parser.Parse(data, True)
     except xml.parsers.expat.ExpatError:
         return None
-    return lines
+    return roots[0], lines
+
+
+def expat_distortion_lines(data: bytes) -> list[int] | None:
+    """Lines of the <distortion> elements per expat, or None if not well-formed."""
+    found = expat_root_and_distortion_lines(data)
+    return None if found is None else found[1]
 
 
 def recovered_distortion_lines(data: bytes) -> list[int]:
@@ -240,9 +265,14 @@ def recovered_distortion_lines(data: bytes) -> list[int]:
 
 def assert_records_account_for_every_distortion(records: list[dict], data: bytes) -> None:
     """``records``: (line, status, model, focal) dicts of one file, in output order."""
-    well_formed = expat_distortion_lines(data)
-    if well_formed is not None:
-        assert [r["line"] for r in records] == well_formed
+    found = expat_root_and_distortion_lines(data)
+    if found is not None and found[0] != "lensdatabase":
+        head, *inside = records
+        assert head["status"] == "not_database" and head["focal"] is None
+        assert [r["line"] for r in inside] == found[1]
+        assert all(r["status"] == "not_database" for r in inside)
+    elif found is not None:
+        assert [r["line"] for r in records] == found[1]
         assert all(r["status"] != "xml_error" for r in records)
     else:
         head, *salvaged = records
