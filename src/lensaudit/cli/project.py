@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import array
 import csv
+import io
 import math
+import os
+import stat
 import sys
+import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
@@ -26,7 +32,8 @@ _BOOLEAN = {True: "true", False: "false"}
     "points",
     required=False,
     metavar="[POINTS]",
-    type=click.Path(path_type=Path, dir_okay=False, allow_dash=True),
+    # Checked when read: click's own checks would give a multi-line usage error.
+    type=click.Path(path_type=Path, allow_dash=True, readable=False),
 )
 @click.option(
     "--entry", metavar="FILE:LINE", help="The <distortion> element at LINE of a Lensfun XML file."
@@ -81,9 +88,9 @@ def project(
     """Project 3D points through a distortion model; flag those beyond r_max.
 
     POINTS is a CSV file with columns x, y, z (a header row is optional; other
-    columns are ignored), a .npy array N x 3, or - / nothing for CSV on
-    standard input. Points are in the camera frame (z forward, in front of
-    the camera for z > 0).
+    columns are ignored), a .npy array N x 3, or - / nothing for standard
+    input (CSV, or .npy recognised by its header). Points are in the camera
+    frame (z forward, in front of the camera for z > 0).
 
     The output is CSV with columns u, v, valid: the pixel in the recorded
     (distorted) image, and whether the point is in front of the camera and
@@ -285,62 +292,262 @@ def _entry_by_name(
     return found, paths.get(found.file)
 
 
-def _read_points(path: Path | None) -> np.ndarray:
-    import numpy as np
+#: What a .npy file starts with (NumPy's format documentation).
+_NPY_MAGIC = b"\x93NUMPY"
+#: What .npz archives and spreadsheets saved as .xlsx start with.
+_ZIP_MAGIC = b"PK\x03\x04"
+#: Longest name or cell shown in a message; the middle of longer ones is cut.
+_SHOWN_LIMIT = 80
+_FILE_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
 
-    if path is not None and str(path) != "-" and path.suffix.lower() == ".npy":
-        try:
-            array = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as error:
-            fail(f"{path}: cannot read as a .npy array: {error}")
-        if array.ndim != 2 or array.shape[1] != 3 or array.dtype.kind not in "iuf":
-            fail(f"{path}: expected a numeric N x 3 array, not {array.dtype} {array.shape}")
-        return array.astype(np.float64, copy=False)
+
+def _read_points(path: Path | None) -> np.ndarray:
+    """The N x 3 points of POINTS: a .npy array (by suffix or header), else CSV."""
     if path is None or str(path) == "-":
-        return _read_csv(sys.stdin, "<stdin>")
+        name, data = "<stdin>", _read_stdin()
+        is_npy = data.startswith(_NPY_MAGIC)
+    else:
+        from ..loader import display_path
+
+        name = _shown(display_path(path))
+        data = _read_file(path, name)
+        is_npy = path.suffix.lower() == ".npy" or data.startswith(_NPY_MAGIC)
+    if data.startswith(_ZIP_MAGIC):
+        fail(f"{name}: a zip archive (.npz, .xlsx?); give CSV or a .npy array")
+    return _parse_npy(data, name) if is_npy else _parse_csv(data, name)
+
+
+def _read_stdin() -> bytes:
+    stream = sys.stdin
+    if stream is None:
+        fail("<stdin>: standard input is closed; give a file of points")
     try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            return _read_csv(stream, str(path))
-    except OSError as error:
-        fail(f"cannot read {path}: {error.strerror or error}")
-    except UnicodeDecodeError:
-        fail(f"{path}: not a UTF-8 text file (give .npy files the .npy suffix)")
+        # Bytes, not text: the platform's newline and encoding handling must
+        # not decide what a bare CR or a non-UTF-8 byte means.
+        buffer = getattr(stream, "buffer", None)
+        return buffer.read() if buffer is not None else stream.read().encode("utf-8")
+    except UnicodeError:
+        fail("<stdin>: not UTF-8 text")
+    except (OSError, ValueError) as error:
+        fail(f"<stdin>: cannot read: {getattr(error, 'strerror', None) or error}")
     raise AssertionError("unreachable")
 
 
-def _read_csv(stream: TextIO, name: str) -> np.ndarray:
+def _read_file(path: Path, name: str) -> bytes:
+    """The bytes of a regular file; anything else is refused before it is read."""
+    # O_NONBLOCK: opening a FIFO without a writer must not wait forever; the
+    # file is then refused by its type.
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        descriptor = os.open(path, flags)
+    except OSError as error:
+        fail(f"{name}: cannot read: {error.strerror or error}")
+    reason = None
+    try:
+        mode = os.fstat(descriptor).st_mode
+        if stat.S_ISREG(mode):
+            with os.fdopen(descriptor, "rb", closefd=False) as stream:
+                return stream.read()
+    except OSError as error:
+        reason = error.strerror or str(error)
+    finally:
+        os.close(descriptor)
+    if reason is not None:
+        fail(f"{name}: cannot read: {reason}")
+    kind = next((kind for test, kind in _FILE_KINDS if test(mode)), "not a file")
+    fail(f"{name}: {kind}, not a regular file; give a CSV or .npy file, or - for standard input")
+    raise AssertionError("unreachable")
+
+
+def _line_at(data: bytes, offset: int) -> int:
+    """The line number of a byte offset, counting CR LF, lone CR and lone LF as line ends."""
+    before = data[:offset]
+    return before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
+
+
+def _parse_csv(data: bytes, name: str) -> np.ndarray:
     """x, y, z from CSV: by header names when there is a header, else the first three columns."""
     import numpy as np
 
-    reader = csv.reader(stream)
-    columns = (0, 1, 2)
-    rows: list[tuple[float, ...]] = []
-    first = True
-    for row in reader:
-        if not row or (len(row) == 1 and not row[0].strip()):
-            continue
-        if first and _is_header(row):
-            first = False
-            names = [cell.strip().lower() for cell in row]
-            missing = [c for c in "xyz" if c not in names]
-            if missing:
-                fail(f"{name}:{reader.line_num}: header has no column {', '.join(missing)}")
-            columns = tuple(names.index(c) for c in "xyz")
-            continue
-        first = False
-        try:
-            rows.append(tuple(float(row[i]) for i in columns))
-        except (ValueError, IndexError):
-            fail(f"{name}:{reader.line_num}: expected three numbers x, y, z, got {row[:4]!r}")
-    return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        fail(f"{name}: UTF-16 text; save it as UTF-8 CSV")
+    nul = data.find(b"\0")
+    if nul >= 0:
+        fail(f"{name}:{_line_at(data, nul)}: NUL byte at offset {nul}; not a CSV text file")
+    try:
+        # Checked whole here, then read again in lines: one str of the whole
+        # input would be kept as four bytes a character by io.StringIO.
+        empty = not data.decode("utf-8-sig").strip()
+    except UnicodeDecodeError as error:
+        fail(
+            f"{name}:{_line_at(data, error.start)}: not UTF-8 text "
+            f"(byte 0x{data[error.start]:02x} at offset {error.start})"
+        )
+    if empty:
+        fail(f"{name}: empty; expected CSV with columns x, y, z")
+    # Floats packed as they are read: a list of tuples would take four times the memory.
+    values = array.array("d")
+    append = values.append
+    rows, (cx, cy, cz) = _csv_rows(data, name)
+    try:
+        for row in rows:
+            try:
+                append(float(row[cx]))
+                append(float(row[cy]))
+                append(float(row[cz]))
+            except (ValueError, IndexError):
+                del values[len(values) - len(values) % 3 :]
+                if _is_blank(row):
+                    continue
+                expected = (
+                    "three numbers x, y, z"
+                    if (cx, cy, cz) == (0, 1, 2)
+                    else f"numbers x, y, z in columns {cx + 1}, {cy + 1}, {cz + 1} of the header"
+                )
+                fail(f"{name}:{rows.line_num}: expected {expected}, got {_row_cells(row)}")
+    except csv.Error as error:
+        _csv_error(error, rows.line_num, name)
+    if not values:
+        fail(f"{name}: no points, only a header")
+    points = np.frombuffer(values, dtype=np.float64).reshape(-1, 3)
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        line = _line_of_point(data, name, int(np.argmin(finite)))
+        point = points[int(np.argmin(finite))].tolist()
+        fail(f"{name}:{line}: x, y, z must be finite numbers, got {point}")
+    return points
+
+
+def _csv_rows(data: bytes, name: str) -> tuple[Any, tuple[int, int, int]]:
+    """A CSV reader positioned after the header (if any), and the columns of x, y, z.
+
+    data is UTF-8 text with at least one line that is not blank.
+    """
+    # newline="": the csv module then reads CR, LF and CR LF line ends alike.
+    stream = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
+    first_line = next(line for line in stream if line.strip())
+    stream.seek(0)
+    # Comma-separated, or what spreadsheets in decimal-comma locales write.
+    delimiter = next((d for d in ";\t" if d in first_line), ",")
+    reader = csv.reader(stream, delimiter=delimiter)
+    try:
+        row = next((row for row in reader if not _is_blank(row)), None)
+    except csv.Error as error:
+        _csv_error(error, reader.line_num, name)
+    if row is None:
+        fail(f"{name}: no points, only empty cells")
+    if not _is_header(row):
+        # Read the first data row again with the others.
+        stream.seek(0)
+        return csv.reader(stream, delimiter=delimiter), (0, 1, 2)
+    names = [cell.strip().lower() for cell in row]
+    missing = [c for c in "xyz" if c not in names]
+    if missing:
+        fail(f"{name}:{reader.line_num}: header has no column {', '.join(missing)}")
+    x, y, z = (names.index(c) for c in "xyz")
+    return reader, (x, y, z)
+
+
+def _line_of_point(data: bytes, name: str, index: int) -> int:
+    """The line of the index-th point (from 0), read again as _parse_csv read it."""
+    rows, _ = _csv_rows(data, name)
+    for row in rows:
+        if not _is_blank(row):
+            if index == 0:
+                return rows.line_num
+            index -= 1
+    raise AssertionError("fewer rows than points")
+
+
+def _csv_error(error: csv.Error, line: int, name: str) -> None:
+    if "field larger" in str(error):
+        fail(f"{name}:{line}: a field longer than {csv.field_size_limit()} characters")
+    fail(f"{name}:{line}: not CSV ({error})")
+
+
+def _is_blank(row: list[str]) -> bool:
+    """An empty line, or one of empty cells as spreadsheets write them (",,")."""
+    return not any(cell.strip() for cell in row)
 
 
 def _is_header(row: list[str]) -> bool:
+    """A header has no number among its first three cells ("1,2,a" is a bad data row)."""
+    for cell in row[:3]:
+        try:
+            float(cell)
+        except ValueError:
+            continue
+        return False
+    return True
+
+
+def _row_cells(row: Sequence[str]) -> str:
+    shown = [repr(_shown(cell, 24)) for cell in row[:4]]
+    return "[" + ", ".join(shown) + (", ...]" if len(row) > 4 else "]")
+
+
+def _shown(text: str, limit: int = _SHOWN_LIMIT) -> str:
+    """Text for a one-line message: control characters escaped, long text cut in the middle."""
+    if not text.isprintable():
+        text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    if len(text) > limit:
+        half = (limit - 3) // 2
+        text = f"{text[:half]}...{text[-half:]}"
+    return text
+
+
+def _parse_npy(data: bytes, name: str) -> np.ndarray:
+    """An N x 3 numeric array from .npy bytes; never unpickles anything."""
+    import numpy as np
+    from numpy.lib import format as npy_format
+
+    if not data.startswith(_NPY_MAGIC):
+        fail(f"{name}: not a .npy array (no NumPy header)")
+    stream = io.BytesIO(data)
     try:
-        [float(cell) for cell in row[:3]]
-    except ValueError:
-        return True
-    return False
+        with warnings.catch_warnings():
+            # A header in Python 2 style earns a warning from numpy: no news to a user.
+            warnings.simplefilter("ignore")
+            version = npy_format.read_magic(stream)
+            if version == (1, 0):
+                shape, fortran_order, dtype = npy_format.read_array_header_1_0(stream)
+            elif version == (2, 0):
+                shape, fortran_order, dtype = npy_format.read_array_header_2_0(stream)
+            else:
+                # Version 3 only adds UTF-8 field names, i.e. structured arrays.
+                fail(f"{name}: .npy format version {version[0]}.{version[1]} is not supported")
+    except Exception as error:  # whatever fails to parse in untrusted bytes is damage
+        reason = _shown(str(error).splitlines()[0] if str(error) else type(error).__name__)
+        fail(f"{name}: damaged .npy header: {reason}")
+    if dtype.hasobject:
+        fail(f"{name}: the array holds Python objects (pickled data), which are never loaded")
+    if len(shape) != 2 or shape[1] != 3 or dtype.kind not in "iuf":
+        shown_shape = " x ".join(map(str, shape)) or "scalar"
+        fail(f"{name}: expected a numeric N x 3 array, not {dtype} {shown_shape}")
+    if shape[0] == 0:
+        fail(f"{name}: no points (a 0 x 3 array)")
+    count = shape[0] * 3
+    needed, available = count * dtype.itemsize, len(data) - stream.tell()
+    if available < needed:
+        fail(
+            f"{name}: truncated: the header announces {shape[0]} x 3 {dtype} "
+            f"({needed} bytes of data), the file has {available}"
+        )
+    array = np.frombuffer(data, dtype=dtype, count=count, offset=stream.tell())
+    array = array.reshape(shape, order="F" if fortran_order else "C")
+    with np.errstate(over="ignore", invalid="ignore"):  # long doubles beyond float64 become inf
+        array = array.astype(np.float64)
+    finite = np.isfinite(array).all(axis=1)
+    if not finite.all():
+        index = int(np.argmin(finite))
+        fail(f"{name}: row {index} (from 0) is not finite: {array[index].tolist()}")
+    return array
 
 
 def _write_pixels(pixels: np.ndarray, valid: np.ndarray, stream: TextIO) -> None:
