@@ -11,6 +11,13 @@ import pytest
 from lensaudit.database import bundled_database_path
 
 
+@pytest.fixture(autouse=True)
+def isolated_cache_directories(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test caches in its own temporary directories, never in the user's ~/.cache."""
+    monkeypatch.setenv("LENSAUDIT_CACHE_DIR", str(tmp_path / "lensaudit-cache"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg-cache"))
+
+
 @pytest.fixture(scope="session")
 def bundled_db() -> Path:
     """The Lensfun database installed with lensfunpy (the default of `lensaudit scan`)."""
