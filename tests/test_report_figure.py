@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import bisect
 import csv
+import decimal
 import math
+from decimal import Decimal
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from lxml import etree
+from matplotlib.container import BarContainer
+from matplotlib.text import Annotation
 
 from lensaudit.pipeline import run
 from lensaudit.report import figures, histogram, write_report
@@ -60,10 +66,43 @@ def test_histogram_counts_equal_a_count_from_the_csv(bundled_report, column, whi
     assert sum(bins[which]) == sum(1 for v in values if v > 0)
 
 
+def decimal_edge(k):
+    """10 ** (k / 10) rounded to 6 significant digits, from 40-digit decimal arithmetic."""
+    with decimal.localcontext() as context:
+        context.prec = 40
+        exact = Decimal(10) ** (Decimal(k) / 10)
+        return float(exact.quantize(Decimal(1).scaleb(exact.adjusted() - 5)))
+
+
 def test_bins_are_ten_per_decade_and_one_is_an_edge(bundled_report):
-    edges = np.array(read_bins(bundled_report[1])[0])
-    assert np.allclose(np.log10(edges[1:] / edges[:-1]), 0.1)
-    assert np.isclose(edges, 1.0).sum() == 1
+    edges = read_bins(bundled_report[1])[0]
+    first = round(10 * math.log10(edges[0]))
+    assert edges == [decimal_edge(first + i) for i in range(len(edges))]
+    assert edges.count(1.0) == 1
+
+
+def test_edges_are_powers_of_ten_rounded_to_six_digits_everywhere():
+    # Rounding the platform's pow must land on the decimal of the exact power:
+    # over the whole range of binary64 the edges are the same on every machine.
+    for k in range(-3070, 3081, 7):
+        assert histogram.edge(k) == decimal_edge(k), k
+    assert histogram.edge(0) == 1.0 and histogram.edge(10) == 10.0
+
+
+def test_csv_edges_are_written_as_their_decimals(bundled_report):
+    with (bundled_report[1] / "fig5_r_normalized.csv").open(newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    for row in rows:
+        for column in ("bin_low", "bin_high"):
+            text = row[column]
+            digits = text.split("e")[0].replace(".", "").replace("-", "").strip("0")
+            assert len(digits) <= 6 and float(text) == decimal_edge(
+                round(10 * math.log10(float(text)))
+            )
+
+
+def bar_patches(axes):
+    return [patch for c in axes.containers if isinstance(c, BarContainer) for patch in c]
 
 
 def test_drawn_bars_are_the_counts(bundled_report):
@@ -71,7 +110,7 @@ def test_drawn_bars_are_the_counts(bundled_report):
     figure = figures.figure5(histogram.figure5(audit))
     edges, counts, counts_paper = read_bins(out)
     for axes, expected in zip(figure.axes[:2], (counts, counts_paper), strict=True):
-        bars = sorted((p.get_x(), p.get_height()) for p in axes.patches)
+        bars = sorted((p.get_x(), p.get_height()) for p in bar_patches(axes))
         wanted = [(low, n) for low, n in zip(edges, expected, strict=False) if n]
         assert [n for _, n in bars] == [n for _, n in wanted]
         assert np.allclose([x for x, _ in bars], [x for x, _ in wanted], rtol=1e-12)
@@ -99,3 +138,93 @@ def test_values_that_a_log_axis_cannot_show_are_counted_apart():
     edges = histogram.log_edges(values)
     assert edges[0] <= 0.5 < 2.0 < edges[-1]
     assert histogram._count(values, edges).sum() == 2
+
+
+@pytest.fixture(scope="module")
+def bundled_figure(bundled_report):
+    figure = figures.figure5(histogram.figure5(bundled_report[0]))
+    figure.canvas.draw()
+    return figure
+
+
+@pytest.mark.parametrize("column, panel", [("r_normalized", 0), ("r_normalized_paper", 1)])
+def test_x_axis_reaches_below_one_and_below_the_smallest_value(
+    bundled_report, bundled_figure, column, panel
+):
+    values = [v for v in rectilinear_finite(bundled_report[1], column) if v > 0]
+    left, right = bundled_figure.axes[panel].get_xlim()
+    # At least a fifth of a decade of margin, so that the bins below 1 stand clear.
+    assert math.log10(min(min(values), 1.0)) - math.log10(left) >= 0.2
+    assert right > max(values)
+
+
+def test_x_axis_reaches_far_below_one_when_a_value_does():
+    data = histogram.from_values(np.array([0.03, 0.5, 2.0, 40.0]), np.array([1.5, 2.0, 3.0, 4.0]))
+    figure = figures.figure5(data)
+    for axes in figure.axes[:2]:
+        assert math.log10(0.03) - math.log10(axes.get_xlim()[0]) >= 0.2
+
+
+def below_one_labels(axes):
+    return sorted(
+        (a.xy[0], a.get_text()) for a in axes.texts if isinstance(a, Annotation) and a.xy[0] < 1
+    )
+
+
+@pytest.mark.parametrize("column, panel", [("r_normalized", 0), ("r_normalized_paper", 1)])
+def test_bins_below_one_carry_their_counts(bundled_report, bundled_figure, column, panel):
+    out = bundled_report[1]
+    edges = read_bins(out)[0]
+    below = [v for v in rectilinear_finite(out, column) if 0 < v < 1]
+    by_hand = count_by_hand(below, edges)
+    expected = [str(n) for low, n in zip(edges, by_hand, strict=False) if n and low < 1]
+    labels = below_one_labels(bundled_figure.axes[panel])
+    assert [text for _, text in labels] == expected and expected
+    assert sum(int(t) for _, t in labels) == len(below)
+
+
+def test_bars_below_one_stand_out_in_colour():
+    data = histogram.from_values(np.array([0.3, 0.9, 2.0, 40.0]), np.array([0.5, 2.0, 3.0, 4.0]))
+    axes = figures.figure5(data).axes[0]
+    below = {tuple(p.get_facecolor()) for p in bar_patches(axes) if p.get_x() + p.get_width() <= 1}
+    above = {tuple(p.get_facecolor()) for p in bar_patches(axes) if p.get_x() >= 1}
+    assert len(below) == 1 and below.isdisjoint(above)
+    assert [t for _, t in below_one_labels(axes)] == ["1", "1"]
+
+
+def test_figure5_draws_nothing_outside_its_canvas(bundled_figure):
+    renderer = bundled_figure.canvas.get_renderer()
+    canvas = bundled_figure.bbox
+    drawn = bundled_figure.get_tightbbox(renderer).transformed(bundled_figure.dpi_scale_trans)
+    assert canvas.x0 <= drawn.x0 and drawn.x1 <= canvas.x1
+    assert canvas.y0 <= drawn.y0 and drawn.y1 <= canvas.y1
+    for axes in bundled_figure.axes[:2]:
+        frame = axes.get_window_extent(renderer)
+        for label in axes.texts:
+            box = label.get_window_extent(renderer)
+            assert frame.x0 <= box.x0 and box.x1 <= frame.x1, label.get_text()
+            assert frame.y0 <= box.y0 and box.y1 <= frame.y1, label.get_text()
+
+
+values_strategy = st.lists(
+    st.floats(min_value=1e-6, max_value=1e6, allow_nan=False), min_size=1, max_size=40
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(values=values_strategy, data=st.data())
+def test_histogram_does_not_depend_on_the_order_of_entries(values, data):
+    shuffled = data.draw(st.permutations(values))
+    first = histogram.from_values(np.array(values), np.array(values) * 3)
+    second = histogram.from_values(np.array(shuffled), np.array(shuffled) * 3)
+    assert first.rows() == second.rows()
+
+
+@settings(max_examples=60, deadline=None)
+@given(values=values_strategy)
+def test_every_value_falls_in_the_bin_its_written_edges_give(values):
+    data = histogram.from_values(np.array(values), np.array(values))
+    rows = data.rows()
+    edges = [float(rows[0][0])] + [float(r[1]) for r in rows]
+    assert [r[2] for r in rows] == count_by_hand(values, edges)
+    assert 1.0 in edges

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,8 +19,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
+from matplotlib.font_manager import FontProperties
 from matplotlib.patches import Circle
-from matplotlib.ticker import NullFormatter
+from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from .histogram import BINS_PER_DECADE
 
@@ -60,16 +62,21 @@ def save(figure: Figure, path: Path | io.IOBase, fmt: str | None = None) -> None
         figure.savefig(path, format=fmt, metadata=_METADATA.get(fmt))
 
 
-def inline_svg(figure: Figure, prefix: str) -> str:
-    """The figure as an ``<svg>`` element for embedding in HTML.
+def svg_text(figure: Figure) -> str:
+    """The figure as a standalone SVG document (the text :func:`save` writes)."""
+    buffer = io.StringIO()
+    save(figure, buffer, "svg")
+    return buffer.getvalue()
+
+
+def inline_svg(figure: Figure | str, prefix: str) -> str:
+    """The figure (or its :func:`svg_text`) as an ``<svg>`` element for embedding in HTML.
 
     The XML prolog and namespace declarations are dropped (HTML parsers know
     SVG) and every id is prefixed, so that several figures in one page cannot
     share an id.
     """
-    buffer = io.StringIO()
-    save(figure, buffer, "svg")
-    text = buffer.getvalue()
+    text = figure if isinstance(figure, str) else svg_text(figure)
     text = text[text.index("<svg") :]
     text = re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text, count=2)
     ids = set(re.findall(r'\sid="([^"]+)"', text))
@@ -82,23 +89,63 @@ def inline_svg(figure: Figure, prefix: str) -> str:
     return text.strip()
 
 
+#: Below 1 the model folds inside its image; those bars and their counts are red.
+FOLD_SHADE = "#fbe3e3"
+#: Margin of Figure 5's x axis beyond the outer bin edges, in decades.
+X_MARGIN_DECADES = 0.3
+
+
+def figure5_x_limits(edges: np.ndarray) -> tuple[float, float]:
+    """x range of Figure 5: every bin, 1 and a margin of :data:`X_MARGIN_DECADES` below
+    both the first edge and 1 (so that the bins below 1 never sit on the frame)."""
+    finite = edges[np.isfinite(edges) & (edges > 0)]
+    low = min(float(finite[0]) if finite.size else 1.0, 1.0)
+    high = max(float(finite[-1]) if finite.size else 1.0, 1.0)
+    margin = 10.0**X_MARGIN_DECADES
+    tiny, huge = np.finfo(np.float64).tiny, np.finfo(np.float64).max
+    return max(low / margin, tiny), min(high * margin, huge)
+
+
 def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: str) -> None:
-    edges = histogram.edges
+    top = np.finfo(np.float64).max
+    edges = np.minimum(histogram.edges, top)
     shown = counts > 0
-    axes.bar(
-        edges[:-1][shown],
-        counts[shown],
-        width=np.diff(edges)[shown],
-        align="edge",
-        color=colour,
-        edgecolor="white",
-        linewidth=0.4,
-        label=label,
-    )
+    below_one = edges[1:] <= 1.0
+    for part, part_colour in ((shown & ~below_one, colour), (shown & below_one, RED)):
+        axes.bar(
+            edges[:-1][part],
+            counts[part],
+            width=np.diff(edges)[part],
+            align="edge",
+            color=part_colour,
+            edgecolor="white",
+            linewidth=0.4,
+            label=label,
+        )
     axes.set_xscale("log")
     axes.set_yscale("log")
-    axes.set_xlim(edges[0], edges[-1])
+    low, high = figure5_x_limits(histogram.edges)
+    axes.set_xlim(low, high)
+    axes.axvspan(low, 1.0, color=FOLD_SHADE, linewidth=0, zorder=0)
     axes.axvline(1.0, color=RED, linestyle="--", linewidth=1.2)
+    # The bins below 1 are the point of the figure but only a few pixels wide
+    # on a log axis: write their counts over them.
+    for start, end, count in zip(edges[:-1], edges[1:], counts, strict=True):
+        if count > 0 and end <= 1.0:
+            axes.annotate(
+                str(int(count)),
+                (math.sqrt(start * end), count),
+                xytext=(0, 3),
+                textcoords="offset points",
+                ha="center",
+                va="bottom",
+                color=RED,
+                fontsize=8,
+                fontweight="bold",
+                # Over the dashed line at 1 when the bin touches it: keep the count legible.
+                bbox={"facecolor": "white", "edgecolor": "none", "pad": 0.6},
+            )
+    axes.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
     axes.grid(True, which="major", color="#dddddd", linewidth=0.5)
     axes.set_axisbelow(True)
 
@@ -106,8 +153,10 @@ def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: st
 def figure5(histogram: Histogram) -> Figure:
     """The paper's Figure 5, correct units (left) beside its mixed units (right).
 
-    Bars are drawn for non-empty bins only (a log axis has no zero); the
-    r_normalized = 1 line separates models that fold inside their image.
+    Bars are drawn for non-empty bins only (a log axis has no zero). The
+    x axis reaches below 1 and below the smallest value; left of the dashed
+    r_normalized = 1 line (shaded) the models fold inside their image, and
+    those bars are red with their counts written over them.
     """
     figure = new_figure(10, 4.2)
     left, right = figure.subplots(1, 2, sharey=True)
@@ -202,12 +251,66 @@ def curve_figure(curve: Curve, title: str) -> Figure:
     return figure
 
 
+#: Font sizes (points) tried for a warp's caption, largest first.
+CAPTION_SIZES = (8.0, 7.0, 6.0, 5.0)
+#: Smallest inset (input image) worth drawing, in pixels along either side.
+MIN_INSET_PIXELS = 24
+_CAPTION_PAD_POINTS = 3.0
+_INSET_TITLE_POINTS = 7.0
+
+
+def wrap_to_width(text: str, width_pixels: float, measure: Callable[[str], float]) -> str | None:
+    """``text`` broken at spaces into lines no wider than ``width_pixels``.
+
+    ``measure`` gives a line's width in pixels. None when a single word is
+    already too wide.
+    """
+    lines: list[str] = []
+    for word in text.split():
+        if measure(word) > width_pixels:
+            return None
+        if lines and measure(f"{lines[-1]} {word}") <= width_pixels:
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    return "\n".join(lines)
+
+
+def _fit_caption(
+    figure: Figure, caption: str, width_pixels: float, height_pixels: float
+) -> tuple[str, float] | None:
+    """(wrapped caption, font size) of the largest of :data:`CAPTION_SIZES` whose
+    block, with its padding, fits ``width_pixels`` x ``height_pixels``; None if none does."""
+    renderer = figure.canvas.get_renderer()
+    points = figure.dpi / 72
+    pad = 2 * _CAPTION_PAD_POINTS * points
+    for size in CAPTION_SIZES:
+        font = FontProperties(size=size)
+
+        def measure(line: str, font: FontProperties = font) -> float:
+            return renderer.get_text_width_height_descent(line, font, ismath=False)[0]
+
+        wrapped = wrap_to_width(caption, width_pixels - pad, measure)
+        if wrapped is None:
+            continue
+        probe = figure.text(0, 0, wrapped, fontsize=size)
+        block = probe.get_window_extent(renderer)
+        probe.remove()
+        if block.width + pad <= width_pixels and block.height + pad <= height_pixels:
+            return wrapped, size
+    return None
+
+
 def warp_figure(warp: Warp, inset: np.ndarray | None, caption: str) -> Figure:
     """The undistorted checkerboard at its native pixel size (Figure 6 style).
 
     The valid region is outlined in green (the r_max circle); pixels outside
     it are dimmed, since the model folds there and repeats image content.
-    ``inset`` (the input checkerboard) is shown in the top-left corner.
+    ``inset`` (the input checkerboard) is shown in the top-left corner, with
+    its title inside the figure; it is left out when it would be smaller than
+    :data:`MIN_INSET_PIXELS`. The caption is wrapped (and its font made
+    smaller) to fit the width under the inset; when even the smallest of
+    :data:`CAPTION_SIZES` cannot fit, it is left out rather than cut.
     """
     height, width = warp.image.shape[:2]
     figure = new_figure(width / 100, height / 100, dpi=100)
@@ -219,23 +322,46 @@ def warp_figure(warp: Warp, inset: np.ndarray | None, caption: str) -> Figure:
     axes.set_xlim(-0.5, width - 0.5)
     axes.set_ylim(height - 0.5, -0.5)
     axes.set_axis_off()
-    if inset is not None:
-        box = figure.add_axes((0.01, 0.70, 0.26, 0.28))
+    points = figure.dpi / 72
+    margin = 2.0  # pixels kept free along the figure's edges
+    caption_top = height - margin
+    title_height = 1.4 * _INSET_TITLE_POINTS * points
+    inset_width, inset_height = 0.26 * width, 0.28 * height
+    if (
+        inset is not None
+        and min(inset_width, inset_height) >= MIN_INSET_PIXELS
+        and inset_height + title_height + 2 * margin <= 0.6 * height
+    ):
+        inset_top = height - margin - title_height
+        box = figure.add_axes(
+            (
+                0.01,
+                (inset_top - inset_height) / height,
+                inset_width / width,
+                inset_height / height,
+            )
+        )
         box.imshow(inset, interpolation="nearest")
         box.set_xticks([])
         box.set_yticks([])
-        box.set_title("input", fontsize=7, color="white", pad=2)
-    axes.text(
-        0.5,
-        0.01,
-        caption,
-        transform=axes.transAxes,
-        ha="center",
-        va="bottom",
-        fontsize=8,
-        color="white",
-        bbox={"facecolor": "black", "alpha": 0.6, "edgecolor": "none", "pad": 3},
-    )
+        box.set_title("input", fontsize=_INSET_TITLE_POINTS, color="white", pad=2)
+        caption_top = inset_top - inset_height - margin
+    fitted = _fit_caption(figure, caption, width - 2 * margin, caption_top - margin)
+    if fitted is not None:
+        wrapped, size = fitted
+        pad = _CAPTION_PAD_POINTS * points
+        axes.text(
+            0.5,
+            (margin + pad) / height,
+            wrapped,
+            transform=figure.transFigure,
+            ha="center",
+            va="bottom",
+            multialignment="center",
+            fontsize=size,
+            color="white",
+            bbox={"facecolor": "black", "alpha": 0.6, "edgecolor": "none", "pad": 3},
+        )
     return figure
 
 

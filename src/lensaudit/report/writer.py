@@ -166,7 +166,9 @@ def write_report(
             _json_ready(
                 {
                     "lensaudit": __version__,
-                    "provenance": facts.to_dict(),
+                    # Without the date: the same database gives the same bytes.
+                    # The date is on report.html only.
+                    "provenance": {k: v for k, v in facts.to_dict().items() if k != "generated"},
                     "summary": summary.to_dict(),
                     "figure5": {
                         "population": histogram.POPULATION,
@@ -198,12 +200,14 @@ def write_report(
         written.append(directory / name)
 
     figure = figures.figure5(fig5)
-    for suffix in ("png", "svg"):
-        path = directory / f"fig5_r_normalized.{suffix}"
-        _atomic(path, lambda p, s=suffix: figures.save(figure, p, s))
-        written.append(path)
+    png = directory / "fig5_r_normalized.png"
+    _atomic(png, lambda p: figures.save(figure, p, "png"))
+    # Drawn once as SVG: the same text is the .svg file and the page's figure.
+    svg = figures.svg_text(figure)
+    _write_text(directory / "fig5_r_normalized.svg", svg)
+    written += [png, directory / "fig5_r_normalized.svg"]
     page = html.render(
-        audit, facts, fig5, figures.inline_svg(figure, "fig5"), table1, table2, comparison
+        audit, facts, fig5, figures.inline_svg(svg, "fig5"), table1, table2, comparison
     )
     _write_text(directory / "report.html", page)
     written.append(directory / "report.html")
