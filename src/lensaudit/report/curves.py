@@ -86,24 +86,70 @@ def sample(
     return Curve(r, d, slope, float(r_max), float(d_max), float(r_corner))
 
 
-def sketch_svg(curve: Curve, width: int = 260, height: int = 150) -> str:
+#: How far below zero a sketch shows D(r), as a fraction of its top. Where D
+#: falls further, the sketch ends (the fold is plain by then).
+SKETCH_FLOOR = 0.5
+
+
+def _sketch_range(curve: Curve) -> tuple[float, float]:
+    """(bottom, top) of a sketch's D axis: the peak or corner, and a little below 0."""
+    finite = curve.d[np.isfinite(curve.d)]
+    peak = float(finite.max()) if finite.size else 1.0
+    top = 1.15 * max(curve.r_corner if math.isfinite(curve.r_corner) else 0.0, peak, 1e-300)
+    lowest = float(finite.min()) if finite.size else 0.0
+    return min(0.0, max(lowest, -SKETCH_FLOOR * top)), top
+
+
+def sketch_sample(
+    entry: DistortionEntry, r_max: float, d_max: float, r_corner: float, points: int = 160
+) -> Curve:
+    """D(r) for :func:`sketch_svg`: from 0 to :func:`plot_extent`, or only up to where
+    D falls below the sketch's floor, so that the whole curve fits in the sketch."""
+    curve = sample(entry, r_max, d_max, r_corner, points)
+    bottom, _ = _sketch_range(curve)
+    below = np.flatnonzero(~(curve.d >= bottom))
+    if below.size == 0 or below[0] == 0:
+        return curve
+    # D crosses the floor between two samples: bisect for the crossing, then
+    # sample again up to it (D is a polynomial, continuous).
+    coefficients = distortion_coefficients(entry)
+    low, high = float(curve.r[below[0] - 1]), float(curve.r[below[0]])
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        if np.polyval(coefficients, middle) >= bottom:
+            low = middle
+        else:
+            high = middle
+    return sample(entry, r_max, d_max, r_corner, points, extent=low)
+
+
+def _text_width(text: str, size: float) -> float:
+    """A generous estimate of the width of sans-serif text (digits and letters)."""
+    return 0.62 * size * len(text)
+
+
+def sketch_svg(curve: Curve, width: int = 260, height: int = 160) -> str:
     """A small SVG of D(r) for inlining in HTML: the curve, r_max and the image corner.
 
     The horizontal line is the image corner radius (distorted); the model folds
-    inside the image when the curve's peak at r_max stays below it.
+    inside the image when the curve's peak at r_max stays below it. Everything
+    is drawn inside the ``width`` x ``height`` view box: the curve is clamped to
+    the plot (use :func:`sketch_sample` so that it does not need to be), labels
+    are kept off the edges.
     """
-    pad_left, pad_right, pad_top, pad_bottom = 34, 8, 8, 22
+    font = 10
+    pad_left, pad_right, pad_top, pad_bottom = 34, 8, 16, 30
     plot_w = width - pad_left - pad_right
     plot_h = height - pad_top - pad_bottom
-    top = 1.15 * max(curve.r_corner, float(np.nanmax(curve.d)) if curve.d.size else 1.0)
-    bottom = min(0.0, max(float(np.nanmin(curve.d)), -0.5 * top))
-    x_end = float(curve.r[-1]) if curve.r.size else 1.0
+    plot_bottom = pad_top + plot_h
+    bottom, top = _sketch_range(curve)
+    x_end = float(curve.r[-1]) if curve.r.size and curve.r[-1] > 0 else 1.0
 
     def x(value: float) -> float:
-        return pad_left + plot_w * value / x_end
+        return pad_left + plot_w * min(max(value, 0.0), x_end) / x_end
 
     def y(value: float) -> float:
-        clipped = min(max(value, bottom), top)
+        clipped = min(max(value, bottom), top) if math.isfinite(value) else bottom
         return pad_top + plot_h * (top - clipped) / (top - bottom)
 
     points = " ".join(f"{x(r):.1f},{y(d):.1f}" for r, d in zip(curve.r, curve.d, strict=True))
@@ -118,31 +164,42 @@ def sketch_svg(curve: Curve, width: int = 260, height: int = 150) -> str:
             f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(0):.1f}" '
             f'y2="{y(0):.1f}" stroke="#ccc"/>'
         )
-    parts.append(
-        f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(curve.r_corner):.1f}" '
-        f'y2="{y(curve.r_corner):.1f}" stroke="#1f77b4" stroke-dasharray="4 3"/>'
-    )
+    if math.isfinite(curve.r_corner):
+        parts.append(
+            f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(curve.r_corner):.1f}" '
+            f'y2="{y(curve.r_corner):.1f}" stroke="#1f77b4" stroke-dasharray="4 3"/>'
+        )
     parts.append(f'<polyline points="{points}" fill="none" stroke="#222" stroke-width="1.5"/>')
-    if math.isfinite(curve.r_max) and curve.r_max <= x_end:
+    shows_r_max = math.isfinite(curve.r_max) and 0 <= curve.r_max <= x_end
+    if shows_r_max:
         parts.append(
             f'<line x1="{x(curve.r_max):.1f}" x2="{x(curve.r_max):.1f}" y1="{pad_top}" '
-            f'y2="{pad_top + plot_h}" stroke="#d62728" stroke-dasharray="3 2"/>'
+            f'y2="{plot_bottom}" stroke="#d62728" stroke-dasharray="3 2"/>'
         )
         parts.append(
             f'<circle cx="{x(curve.r_max):.1f}" cy="{y(curve.d_max):.1f}" r="3" fill="#d62728"/>'
         )
+    axis_row = plot_bottom + font + 1
     labels = [
-        (pad_left - 3, y(curve.r_corner) + 4, "end", "#1f77b4", f"{curve.r_corner:.2f}"),
+        (pad_left, pad_top - 4, "start", "#222", "D(r)"),
         (pad_left - 3, y(0) + 4, "end", "#555", "0"),
-        (pad_left + plot_w - 3, pad_top + 12, "end", "#555", f"r from 0 to {x_end:.2f}"),
-        (pad_left + 3, pad_top + 12, "start", "#222", "D(r)"),
+        (pad_left, axis_row, "middle", "#555", "0"),
+        (pad_left + plot_w, axis_row, "end", "#555", f"r {x_end:.2f}"),
     ]
-    if math.isfinite(curve.r_max) and curve.r_max <= x_end:
-        labels.append((x(curve.r_max), height - 6, "middle", "#d62728", f"r_max {curve.r_max:.3g}"))
+    if math.isfinite(curve.r_corner):
+        labels.append(
+            (pad_left - 3, y(curve.r_corner) + 4, "end", "#1f77b4", f"{curve.r_corner:.2f}")
+        )
+    if shows_r_max:
+        text = f"r_max {curve.r_max:.3g}"
+        half = _text_width(text, font) / 2
+        # Centred under the red line, but never past the sketch's edges.
+        centre = min(max(x(curve.r_max), half + 1), width - half - 1)
+        labels.append((centre, height - 4, "middle", "#d62728", text))
     for lx, ly, anchor, colour, text in labels:
         parts.append(
             f'<text x="{lx:.1f}" y="{ly:.1f}" text-anchor="{anchor}" fill="{colour}" '
-            f'font-size="10" font-family="sans-serif">{escape(text)}</text>'
+            f'font-size="{font}" font-family="sans-serif">{escape(text)}</text>'
         )
     parts.append("</svg>")
     return "".join(parts)

@@ -46,6 +46,9 @@ ENTRY_COLUMNS = (
     ("status", "status", "text"),
 )
 
+# The entry table's box may be wider than the text (up to 1400 px, centred)
+# and scrolls on its own, both ways with a sticky heading, so that the page
+# itself never scrolls sideways.
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1b1b1b}
 main{max-width:1200px;margin:0 auto;padding:1em 1.5em 3em}
@@ -61,8 +64,11 @@ td.n,th.n{text-align:right}caption{text-align:left;padding:.3em 0;color:#444}
 .fold h3{font-size:1em;margin:.1em 0 .4em}.fold dl{display:grid;
 grid-template-columns:max-content 1fr;gap:0 .8em;margin:.4em 0 0;font-size:.9em}
 .fold dd{margin:0}.controls{display:flex;flex-wrap:wrap;gap:.6em 1.2em;align-items:center;
-margin:.6em 0}#entries{font-size:.85em;width:100%}#entries th{cursor:pointer;
-position:sticky;top:0;background:#f6f6f6;user-select:none}
+margin:.6em 0}.scroll{overflow-x:auto;max-width:100%}
+.entries-box{overflow:auto;max-height:85vh;border:1px solid #e3e3e3;
+width:min(calc(100vw - 3em),1400px);position:relative;left:50%;transform:translateX(-50%)}
+#entries{font-size:.85em;width:100%}#entries th,#entries td{padding:.25em .4em}
+#entries th{cursor:pointer;position:sticky;top:0;z-index:1;background:#f6f6f6;user-select:none}
 #entries th[aria-sort=ascending]::after{content:" \\25B2"}
 #entries th[aria-sort=descending]::after{content:" \\25BC"}
 #entries tr.fold-row td{background:#fdecea}code{font-size:.92em}
@@ -296,12 +302,8 @@ def _folding(audit: Audit) -> str:
     cards = []
     for index in summary.folding:
         entry = audit.entries[index]
-        curve = curves.sample(
-            entry,
-            float(m.r_max[index]),
-            float(m.d_max[index]),
-            float(m.r_corner[index]),
-            points=160,
+        curve = curves.sketch_sample(
+            entry, float(m.r_max[index]), float(m.d_max[index]), float(m.r_corner[index])
         )
         record = {
             "model": entry.model,
@@ -360,17 +362,17 @@ def _comparison(comparison: Comparison) -> str:
             f"<th{' class=n' if i else ''}>{escape(h)}</th>" for i, h in enumerate(header)
         )
         blocks.append(
-            f"<table><caption>{title}: paper | lensaudit</caption><thead><tr>{head}"
-            f"</tr></thead><tbody>{body}</tbody></table>"
+            f'<div class="scroll"><table><caption>{title}: paper | lensaudit</caption>'
+            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
         )
     other = "".join(
         f"<tr><td>{escape(q)}</td><td class=n>{escape(p)}</td><td>{escape(h)}</td></tr>"
         for q, p, h in comparison.other
     )
     blocks.append(
-        "<table><caption>Other values</caption><thead><tr><th>quantity</th>"
-        f"<th class=n>paper</th><th>lensaudit</th></tr></thead><tbody>{other}"
-        "</tbody></table>"
+        '<div class="scroll"><table><caption>Other values</caption><thead><tr>'
+        f"<th>quantity</th><th class=n>paper</th><th>lensaudit</th></tr></thead>"
+        f"<tbody>{other}</tbody></table></div>"
     )
     differences = "".join(f"<li>{escape(line)}</li>" for line in comparison.differences)
     agreements = "".join(f"<li>{escape(line)}</li>" for line in comparison.agreements)
@@ -476,7 +478,9 @@ the model folds inside the image when its peak stays below the corner.</p>
 </div>
 <noscript><p>Sorting and filtering need JavaScript; every entry is also in entries.csv.
 </p></noscript>
+<div class="entries-box">
 <table id="entries"><thead><tr>{heads}</tr></thead><tbody></tbody></table>
+</div>
 </section>
 </main>
 <script id="entries-data" type="application/json">{data}</script>
