@@ -7,7 +7,10 @@ sees. Skipped where no Chromium is installed (`apt-get install chromium`).
 
 from __future__ import annotations
 
+import base64
 import csv
+import hashlib
+import json
 import re
 import shutil
 import subprocess
@@ -17,7 +20,7 @@ import pytest
 from lxml import html as lxml_html
 
 from lensaudit.pipeline import run
-from lensaudit.report import write_report
+from lensaudit.report import paper, write_report
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 BROWSER = next((shutil.which(name) for name in BROWSERS if shutil.which(name)), None)
@@ -29,7 +32,7 @@ pytestmark = pytest.mark.skipif(
 HOSTILE_LENS = "<img src=x onerror=\"document.body.setAttribute('data-pwned','1')\">"
 
 
-def rendered(page, fragment, profile):
+def rendered(page, fragment, profile, window="1400,900"):
     """The DOM of ``page`` after its script ran, as an lxml tree."""
     url = page.resolve().as_uri() + ("#" + fragment if fragment else "")
     result = subprocess.run(
@@ -38,12 +41,14 @@ def rendered(page, fragment, profile):
             "--headless",
             "--no-sandbox",
             "--disable-gpu",
+            "--disable-quic",
             "--disable-background-networking",
             "--disable-component-update",
             "--disable-sync",
             "--no-first-run",
             "--no-default-browser-check",
             f"--user-data-dir={profile}",
+            f"--window-size={window}",
             "--virtual-time-budget=5000",
             "--dump-dom",
             url,
@@ -67,8 +72,9 @@ def table_rows(dom):
 
 @pytest.fixture(scope="module")
 def bundled(bundled_db, tmp_path_factory):
+    """The report of the bundled database, with the paper comparison (the widest page)."""
     out = tmp_path_factory.mktemp("bundled")
-    write_report(run(bundled_db), out)
+    write_report(run(bundled_db), out, paper_values=paper.load_values())
     with (out / "entries.csv").open(newline="") as stream:
         entries = list(csv.DictReader(stream))
     return out / "report.html", entries
@@ -156,3 +162,76 @@ def test_the_page_shows_provenance_tables_and_figure(bundled, full_view):
     assert len(dom.xpath('//article[@class="fold"]')) == sum(
         e["folds_in_image"] == "true" for e in entries
     )
+
+
+# Measures the laid-out page once its own script has run, and writes what it
+# found into the DOM for --dump-dom. It is allowed by adding its hash to the
+# page's Content-Security-Policy; nothing else of the page changes.
+PROBE = r"""
+window.addEventListener("load", function () {
+  var root = document.documentElement;
+  var found = {scrollWidth: root.scrollWidth, clientWidth: root.clientWidth, sketches: []};
+  var box = document.getElementById("entries").parentElement;
+  found.tableBox = {scrollWidth: box.scrollWidth, clientWidth: box.clientWidth,
+                    right: box.getBoundingClientRect().right};
+  document.querySelectorAll("article.fold svg").forEach(function (svg) {
+    var view = svg.viewBox.baseVal, outside = [], drawn = 0;
+    svg.querySelectorAll("*").forEach(function (element) {
+      var b = element.getBBox();
+      drawn += 1;
+      if (b.x < view.x - 0.5 || b.y < view.y - 0.5 ||
+          b.x + b.width > view.x + view.width + 0.5 ||
+          b.y + b.height > view.y + view.height + 0.5) {
+        outside.push(element.tagName + " " + element.textContent);
+      }
+    });
+    found.sketches.push({where: svg.closest("article").dataset.where, drawn: drawn,
+                         outside: outside});
+  });
+  var out = document.createElement("pre");
+  out.id = "probe";
+  out.textContent = JSON.stringify(found);
+  document.body.appendChild(out);
+});
+"""
+
+
+def probed(page, tmp_path, profile, window):
+    """What :data:`PROBE` measured on ``page`` in a ``window`` (WIDTH,HEIGHT) browser."""
+    text = page.read_text(encoding="utf-8")
+    digest = base64.b64encode(hashlib.sha256(PROBE.encode()).digest()).decode()
+    text, allowed = re.subn(
+        r"script-src ('sha256-[^']+')", rf"script-src \1 'sha256-{digest}'", text
+    )
+    assert allowed == 1
+    copy = tmp_path / page.name
+    copy.write_text(text.replace("</body>", f"<script>{PROBE}</script></body>"), "utf-8")
+    dom = rendered(copy, "", profile, window)
+    return json.loads(dom.xpath('string(//pre[@id="probe"])'))
+
+
+@pytest.fixture(scope="module")
+def measured_at_1400(bundled, profile, tmp_path_factory):
+    return probed(bundled[0], tmp_path_factory.mktemp("probe"), profile, "1400,900")
+
+
+def test_the_page_does_not_scroll_sideways_in_a_1400_px_window(measured_at_1400):
+    found = measured_at_1400
+    assert 1300 <= found["clientWidth"] <= 1400
+    assert found["scrollWidth"] <= found["clientWidth"]
+    assert found["tableBox"]["right"] <= found["clientWidth"]
+
+
+def test_the_entry_table_scrolls_in_its_own_box_in_a_narrow_window(bundled, profile, tmp_path):
+    found = probed(bundled[0], tmp_path, profile, "800,900")
+    assert found["scrollWidth"] <= found["clientWidth"]
+    assert found["tableBox"]["scrollWidth"] > found["tableBox"]["clientWidth"]
+
+
+def test_every_sketch_is_drawn_inside_its_view_box(bundled, measured_at_1400):
+    _, entries = bundled
+    folding = [f"{e['file']}:{e['line']}" for e in entries if e["folds_in_image"] == "true"]
+    sketches = measured_at_1400["sketches"]
+    assert sorted(s["where"] for s in sketches) == sorted(folding)
+    assert all(s["drawn"] >= 8 for s in sketches)
+    assert {s["where"]: s["outside"] for s in sketches} == {w: [] for w in folding}
