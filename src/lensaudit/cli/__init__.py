@@ -21,6 +21,7 @@ SUBCOMMANDS = {
     "check": ("check", "Fail when a database (or a change to it) has models that fold."),
     "project": ("project", "Project 3D points with a model, dropping those beyond r_max."),
     "history": ("history", "Audit every revision of a Lensfun database kept in git."),
+    "fix": ("fix", "Refit models that fold inside their image; patch the XML with --write."),
 }
 
 

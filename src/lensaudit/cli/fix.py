@@ -1,0 +1,352 @@
+"""``lensaudit fix``: refit models that fold inside their image, and patch the XML."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+
+import click
+
+from .options import database_paths, fail, output_file, output_stream
+
+if TYPE_CHECKING:
+    from ..fix import FixResult
+    from ..pipeline import Audit
+    from ..xmlpatch import FilePatch
+
+FORMAT_NAMES = ("table", "csv", "json")
+
+
+@click.command()
+@database_paths
+@click.option(
+    "--lens",
+    metavar="TEXT",
+    default=None,
+    help="Only lenses whose maker and name contain TEXT (case-insensitive).",
+)
+@click.option(
+    "--focal", type=float, metavar="MM", default=None, help="Only entries calibrated at MM."
+)
+@click.option(
+    "--target",
+    type=float,
+    metavar="R",
+    default=None,
+    help="Undistorted radius, Hugin units, up to which the fixed model must "
+    "increase (r_max beyond it); inf: a model that never folds. "
+    "[default: image corner times the margin, at least the corner]",
+)
+@click.option(
+    "--margin",
+    type=float,
+    metavar="M",
+    default=1.0,
+    show_default=True,
+    help="Fix entries with r_normalized < M; the fixed model reaches M times "
+    "the image corner before it folds.",
+)
+@click.option(
+    "--tolerance",
+    type=float,
+    metavar="PX",
+    default=50.0,
+    show_default=True,
+    help="Largest change of D over the image, in pixels of a 6000x4000 frame, "
+    "for an entry to count as fixed.",
+)
+@click.option(
+    "-f",
+    "--format",
+    "output_format",
+    type=click.Choice(FORMAT_NAMES),
+    default="table",
+    show_default=True,
+    help="table: results and the diff; csv: one row per entry; json: both as data.",
+)
+@output_file
+@click.option(
+    "--write",
+    is_flag=True,
+    help="Patch the XML files in place: only the fixed entries' coefficients change.",
+)
+@click.option(
+    "--cache/--no-cache",
+    default=True,
+    show_default=True,
+    help="Reuse files parsed by an earlier run when unchanged (as in scan).",
+)
+def fix(
+    paths: tuple[Path, ...],
+    lens: str | None,
+    focal: float | None,
+    target: float | None,
+    margin: float,
+    tolerance: float,
+    output_format: str,
+    output: Path | None,
+    write: bool,
+    cache: bool,
+) -> None:
+    """Refit distortion models that fold inside their image, so that they do not.
+
+    For every entry with r_normalized below the margin (by default the
+    entries `lensaudit scan` lists as folding inside their own image), find
+    the coefficients of the same model (ptlens a, b, c; poly3 k1; poly5 k1,
+    k2) whose D(r) stays closest to the original over the image and that
+    increase up to the target radius and reach margin x the image corner
+    before folding. The fit is a linear program (minimax over radii 0 to the
+    corner); the result is verified with the exact r_max solver, and the
+    coefficients are rounded to the decimals the file uses (at least 5
+    significant digits).
+
+    Changes of D are in pixels of a 6000x4000 frame: Hugin r = 1, half the
+    short side, is 2000 px. An entry counts as fixed when the largest change
+    is within --tolerance; the others are reported with the reason.
+
+    PATH is a database directory or XML files; without PATH, the database
+    bundled with lensfunpy is examined (and never written). Without --write,
+    the unified diff of what would change is printed. With --write, the files
+    are patched in place: only the changed attribute values, every other byte
+    as it was, each file replaced atomically, and none if a file changed
+    since it was read.
+
+    \b
+    Exit status:
+      0  done (whether or not every entry could be fixed)
+      2  bad usage, or input that could not be read or patched
+    """
+    from ..loader import LoadError
+    from ..pipeline import run
+
+    _check_options(target, margin, tolerance)
+    try:
+        audit = run(list(paths) or None, cache=cache)
+    except LoadError as error:
+        fail(str(error))
+    if audit.files and all(f.error for f in audit.files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
+    if write and audit.source.bundled:
+        fail(
+            "--write patches files in place: give the database PATH to patch "
+            "(the database bundled with lensfunpy is not written)"
+        )
+    from .. import fix as stage
+    from ..xmlpatch import PatchError, unified_diff
+    from ..xmlpatch import write as write_patch
+
+    indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
+    try:
+        sources = stage.read_sources(audit, indices)
+        results = stage.fix_audit(
+            audit, indices, margin=margin, target=target, tolerance=tolerance, sources=sources
+        )
+        patches = [p for p in stage.patches(results, sources) if p.changed]
+    except PatchError as error:
+        fail(str(error))
+    written: list[str] = []
+    if write:
+        for patch in patches:
+            try:
+                write_patch(patch)
+            except PatchError as error:
+                fail(str(error))
+            written.append(patch.name)
+    diff = "" if write else "".join(unified_diff(p) for p in patches)
+    settings = {
+        "margin": margin,
+        "target": target,
+        "tolerance_px": tolerance,
+        "lens": lens,
+        "focal": focal,
+    }
+    with output_stream(output) as stream:
+        if output_format == "csv":
+            _write_csv(results, stream)
+        elif output_format == "json":
+            _write_json(audit, results, settings, diff, written, stream)
+        else:
+            _write_table(audit, results, settings, patches, diff, written, stream)
+
+
+def _check_options(target: float | None, margin: float, tolerance: float) -> None:
+    if target is not None and not target > 0:
+        fail(f"--target {target:g}: expected a radius > 0 in Hugin units (or inf)")
+    if not (margin > 0 and math.isfinite(margin)):
+        fail(f"--margin {margin:g}: expected a finite number > 0 (1: the image corner)")
+    if not tolerance >= 0:
+        fail(f"--tolerance {tolerance:g}: expected pixels >= 0")
+
+
+def _coefficients(names: tuple[str, ...], texts: tuple[str, ...]) -> str:
+    return " ".join(f"{n}={t}" for n, t in zip(names, texts, strict=True)) if texts else "-"
+
+
+def _number(value: float, digits: int = 4) -> str:
+    if math.isnan(value):
+        return "-"
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{value:.{digits}g}"
+
+
+def _ratio(value: float) -> str:
+    return _number(value) if not math.isfinite(value) else f"{value:.3f}"
+
+
+def _write_table(
+    audit: Audit,
+    results: list[FixResult],
+    settings: dict[str, Any],
+    patches: list[FilePatch],
+    diff: str,
+    written: list[str],
+    stream: TextIO,
+) -> None:
+    from .. import __version__
+    from ..fix import FRAME, PIXELS_PER_UNIT
+    from ..formats.table import text_table
+
+    margin = settings["margin"]
+    lines = [f"lensaudit {__version__} fix: {audit.source.label}"]
+    chosen = " matching the filters" if settings["lens"] or settings["focal"] else ""
+    lines.append(
+        f"{len(results)} entr{'y' if len(results) == 1 else 'ies'}{chosen} with "
+        f"r_normalized < {margin:g} (D(r_max) below {margin:g} x the image corner)"
+    )
+    if not results:
+        stream.write("\n".join(lines) + "\n")
+        return
+    lines.append(
+        f"Changes of D in pixels of a {FRAME} frame ({PIXELS_PER_UNIT:g} px = half the "
+        "short side = Hugin r 1); maximum over radii 0 to the corner, RMS over the image."
+    )
+    lines.append("")
+    lines += text_table(
+        [
+            "where",
+            "lens",
+            "focal",
+            "model",
+            "coefficients",
+            "r_max",
+            "r_norm",
+            "max px",
+            "rms px",
+            "status",
+        ],  # fmt: skip
+        [
+            row
+            for r in results
+            for row in (
+                [
+                    r.where,
+                    r.entry.lens,
+                    f"{r.entry.focal:g}",
+                    r.entry.model,
+                    "old " + _coefficients(r.names, r.old_texts),
+                    _number(r.r_max_before),
+                    _ratio(r.r_normalized_before),
+                    "",
+                    "",
+                    "",
+                ],
+                [
+                    "",
+                    "",
+                    "",
+                    "",
+                    "new " + _coefficients(r.names, r.new_texts),
+                    _number(r.r_max_after),
+                    _ratio(r.r_normalized_after),
+                    f"{r.max_change_px:.1f}" if r.new else "-",
+                    f"{r.rms_change_px:.1f}" if r.new else "-",
+                    r.status,
+                ],
+            )
+        ],
+        right=[False, False, True, False, False, True, True, True, True, False],
+    )
+    problems = [r for r in results if not r.fixed]
+    if problems:
+        lines.append("")
+        lines += [f"{r.where}: {r.status}: {r.message}" for r in problems]
+    fixed = len(results) - len(problems)
+    lines.append("")
+    lines.append(
+        f"{fixed} fixed, {len(problems)} not fixed (tolerance {settings['tolerance_px']:g} px)."
+    )
+    if written:
+        lines.append(f"Written: {', '.join(written)}.")
+    elif patches:
+        count = len(patches)
+        lines.append(f"Nothing written; --write patches {count} file{'s' if count != 1 else ''}:")
+    stream.write("\n".join(lines) + "\n")
+    if diff:
+        stream.write("\n" + diff)
+
+
+def _csv_field(value: Any) -> str:
+    from ..formats.csv_format import text_column
+    from ..pipeline import format_float
+
+    if isinstance(value, float):
+        return format_float(value)
+    return text_column([value])[0]
+
+
+def _write_csv(results: list[FixResult], stream: TextIO) -> None:
+    from ..fix import RECORD_COLUMNS
+
+    stream.write(",".join(RECORD_COLUMNS) + "\n")
+    for result in results:
+        record = result.record()
+        stream.write(",".join(_csv_field(record[name]) for name in RECORD_COLUMNS) + "\n")
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, float):
+        if math.isnan(value):
+            return None
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+    return value
+
+
+def _write_json(
+    audit: Audit,
+    results: list[FixResult],
+    settings: dict[str, Any],
+    diff: str,
+    written: list[str],
+    stream: TextIO,
+) -> None:
+    from .. import __version__
+    from ..fix import FRAME, PIXELS_PER_UNIT, RECORD_COLUMNS
+
+    entries = []
+    for result in results:
+        record = result.record()
+        for name in ("a", "b", "c", "k1", "k2"):
+            text = record[f"{name}_new"]
+            record[f"{name}_new"] = float(text) if text else None
+        entries.append({name: _json_value(record[name]) for name in RECORD_COLUMNS})
+    document = {
+        "lensaudit": __version__,
+        "database": {
+            "label": audit.source.label,
+            "paths": [str(p) for p in audit.source.paths],
+        },
+        "settings": {k: _json_value(v) for k, v in settings.items()},
+        "units": {
+            "radii": "Hugin units: 1 = half the short side of the image",
+            "changes": f"pixels of a {FRAME} frame ({PIXELS_PER_UNIT:g} px per Hugin unit)",
+        },
+        "entries": entries,
+        "diff": diff,
+        "written": written,
+    }
+    json.dump(document, stream, indent=1, allow_nan=False)
+    stream.write("\n")

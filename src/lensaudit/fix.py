@@ -1,0 +1,757 @@
+"""Refit a distortion model that folds inside its image so that it no longer does.
+
+The paper ends by proposing to estimate polynomial coefficients under the
+constraint that r_max is infinite, or beyond a chosen radius. This stage does
+that for an entry already in a Lensfun database: among the coefficients of
+the same model (ptlens a, b, c; poly3 k1; poly5 k1, k2), it finds those whose
+curve D(r) stays closest to the original over the image and that
+
+* are increasing (D' >= :data:`SLOPE_FLOOR`) up to the target radius, an
+  undistorted radius in Hugin units (by default the image corner times the
+  margin, and never less than the corner), so that r_max lies beyond it; and
+* reach the distorted radius margin x r_corner while still increasing, so
+  that d_max = D(r_max) is at least that: the entry no longer folds inside
+  its image (r_normalized >= margin), which is what ``lensaudit scan`` flags.
+
+Both are needed: the Tokina 11-16 mm at 11 mm has r_max = 2.19, beyond its
+corner 1.80, yet folds inside its image because D only climbs to 1.69.
+
+Method. D is linear in each model's coefficients,
+
+    ptlens  D = r + a (r^4 - r) + b (r^3 - r) + c (r^2 - r)
+    poly3   D = r + k1 (r^3 - r)
+    poly5   D = r + k1 r^3 + k2 r^5
+
+so for a radius T >= target the fit is a linear program on grids: minimize t
+subject to |D_new(r) - D_old(r)| <= t over [0, r_corner], D_new'(r) >=
+SLOPE_FLOOR over [0, T] and D_new(T) >= margin x r_corner (scipy's HiGHS).
+T itself is searched. The result is verified with the exact r_max solver
+(:mod:`lensaudit.metrics`); where the grid let a fold through, points are
+added where D' is smallest and the program solved again. The coefficients
+are then rounded to the decimals the file uses for the entry (at least five
+significant digits) and verified again, with one more digit where rounding
+broke them. For an infinite target, D' >= SLOPE_FLOOR is imposed on all of
+[0, inf) through the substitution r = s / (1 - s), s in [0, 1].
+
+Units. Radii are Hugin units (r = 1 is half the short side of the image).
+Changes of D are reported in pixels of a 6000 x 4000 frame, where that half
+short side is :data:`PIXELS_PER_UNIT` = 2000 px: the maximum over radii 0 to
+r_corner, and the root mean square over the image's own frame (aspect x 1).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.polynomial import polynomial as P
+
+from . import metrics
+from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
+
+if TYPE_CHECKING:
+    import pandas
+
+    from .pipeline import Audit
+    from .xmlpatch import FilePatch, StartTag
+
+#: Pixels per Hugin unit in the frame changes are reported in: half the short
+#: side of a 6000 x 4000 image.
+PIXELS_PER_UNIT = 2000.0
+#: Frame in which changes are reported, for messages and documentation.
+FRAME = "6000x4000"
+DEFAULT_MARGIN = 1.0
+DEFAULT_TOLERANCE_PX = 50.0
+#: Least slope D' the fit allows up to the target: far above the linear
+#: program's feasibility tolerance (1e-7), so that the verified model keeps
+#: a positive slope between grid points and after rounding.
+SLOPE_FLOOR = 1e-3
+#: D(T) must exceed the distorted radius to reach by this relative margin, so
+#: that rounding in the audit's own arithmetic cannot turn it back into a fold.
+REACH_SLACK = 1e-5
+#: Least number of significant digits a new coefficient is written with.
+MIN_SIGNIFICANT_DIGITS = 5
+
+STATUS_FIXED = "fixed"
+STATUS_BEYOND_TOLERANCE = "beyond_tolerance"
+STATUS_NO_SOLUTION = "no_solution"
+
+_GRID_POINTS = 161  # points of each grid of the linear program
+_SEARCH_POINTS = 9  # values of T tried before the bounded search
+_SEARCH_SPAN = 4.0  # T is searched in [target, _SEARCH_SPAN * target]
+_REFINEMENTS = 12  # rounds of grid refinement before giving up
+_EXTRA_DIGITS = 12  # digits added at most when rounding breaks a fix
+_GAUSS_POINTS = 48  # Gauss-Legendre nodes per axis for the RMS over the frame
+
+# D(r) = r + sum of coefficient x term(r); terms as polynomial coefficients, lowest power first.
+_TERMS: dict[str, tuple[tuple[float, ...], ...]] = {
+    "ptlens": ((0, -1, 0, 0, 1), (0, -1, 0, 1), (0, -1, 1)),
+    "poly3": ((0, -1, 0, 1),),
+    "poly5": ((0, 0, 0, 1), (0, 0, 0, 0, 0, 1)),
+}
+_IDENTITY = np.array([0.0, 1.0])
+#: Degree of D' in r, per model.
+_SLOPE_DEGREE = {model: max(map(len, terms)) - 2 for model, terms in _TERMS.items()}
+
+
+def distortion_polynomial(model: str, coefficients: Sequence[float]) -> np.ndarray:
+    """D(r) of a model as polynomial coefficients, lowest power first (Hugin units)."""
+    result = _IDENTITY.copy()
+    for value, term in zip(coefficients, _TERMS[model], strict=True):
+        result = P.polyadd(result, value * np.asarray(term, dtype=np.float64))
+    return result
+
+
+def _term_matrix(model: str) -> np.ndarray:
+    """One row per coefficient: its term of D, padded to degree 5."""
+    rows = np.zeros((len(_TERMS[model]), 6))
+    for index, term in enumerate(_TERMS[model]):
+        rows[index, : len(term)] = term
+    return rows
+
+
+@dataclass(frozen=True)
+class Change:
+    """How far a new model's D is from the old one's, in pixels of the reporting frame."""
+
+    max_px: float
+    rms_px: float
+
+
+def change_of_distortion(
+    model: str, old: Sequence[float], new: Sequence[float], aspect_ratio: float
+) -> Change:
+    """Maximum and RMS of |D_new - D_old| over the image, in pixels (6000x4000 frame).
+
+    The maximum is over radii 0 to r_corner = hypot(aspect, 1), found exactly
+    at the end points and the real roots of the difference's derivative. The
+    RMS is over the image's frame (aspect x 1 Hugin units, every pixel alike).
+    """
+    difference = P.polysub(distortion_polynomial(model, new), distortion_polynomial(model, old))
+    difference = np.trim_zeros(difference, "b")
+    aspect = max(aspect_ratio, 1.0 / aspect_ratio)
+    r_corner = math.hypot(aspect, 1.0)
+    if difference.size == 0:
+        return Change(0.0, 0.0)
+    radii = [0.0, r_corner]
+    if difference.size > 2:
+        roots = P.polyroots(P.polyder(difference))
+        radii += [
+            root.real
+            for root in roots
+            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < r_corner
+        ]
+    largest = float(np.max(np.abs(P.polyval(np.array(radii), difference))))
+    nodes, weights = np.polynomial.legendre.leggauss(_GAUSS_POINTS)
+    x = (nodes + 1) * aspect / 2
+    y = (nodes + 1) / 2
+    radius = np.hypot(x[:, None], y[None, :])
+    mean_square = float(
+        np.einsum("i,j,ij->", weights, weights, P.polyval(radius, difference) ** 2) / 4
+    )
+    return Change(largest * PIXELS_PER_UNIT, math.sqrt(mean_square) * PIXELS_PER_UNIT)
+
+
+@dataclass(frozen=True)
+class Goal:
+    """What a fixed model must do, in Hugin units.
+
+    ``target``: undistorted radius up to which D must be increasing (r_max
+    beyond it; ``inf`` for a model that never folds). ``reach``: distorted
+    radius D must attain before it folds (d_max >= reach). ``margin``: the
+    r_normalized = d_max / r_corner the fixed model must have at least.
+    ``aspect_ratio`` is the image's, and r_corner = hypot(aspect, 1).
+    """
+
+    aspect_ratio: float
+    r_corner: float
+    target: float
+    reach: float
+    margin: float
+
+
+def goal_for(
+    aspect_ratio: float, margin: float = DEFAULT_MARGIN, target: float | None = None
+) -> Goal:
+    """The default goal for an image of the given aspect ratio.
+
+    The target defaults to r_corner x margin, and is never below r_corner.
+    """
+    r_corner = float(metrics.image_corner(aspect_ratio))
+    if target is None:
+        target = r_corner * max(margin, 1.0)
+    return Goal(aspect_ratio, r_corner, float(target), r_corner * margin, margin)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The audit of one model: r_max, d_max, r_normalized, and whether it meets a goal."""
+
+    r_max: float
+    d_max: float
+    r_normalized: float
+    meets_goal: bool
+
+
+def judge(model: str, coefficients: Sequence[float], goal: Goal) -> Verdict:
+    """Audit coefficients with the same exact solver as ``lensaudit scan``.
+
+    The goal is met when r_max is beyond the target (or infinite) and
+    r_normalized is at least the margin.
+    """
+    values = dict(zip(MODEL_COEFFICIENTS[model], coefficients, strict=True))
+    a, b, c, k1, k2 = ([values.get(name, math.nan)] for name in ("a", "b", "c", "k1", "k2"))
+    # Crop factor and focal length only enter the paper's columns, unused here.
+    result = metrics.compute([model], a, b, c, k1, k2, [1.0], [goal.aspect_ratio], [1.0], [True])
+    r_max = float(result.r_max[0])
+    d_max = float(result.d_max[0])
+    r_normalized = d_max / goal.r_corner
+    beyond = r_max > goal.target or math.isinf(r_max)
+    return Verdict(r_max, d_max, r_normalized, bool(beyond and r_normalized >= goal.margin))
+
+
+@dataclass(frozen=True)
+class Fit:
+    """Coefficients found by the linear program, before rounding."""
+
+    coefficients: tuple[float, ...]
+    radius: float  # the T used: increasing on [0, T], D(T) >= reach
+    deviation: float  # the program's objective, Hugin units, on its grid
+
+
+class _Program:
+    """The linear program of one entry, for any radius T (see the module docstring)."""
+
+    def __init__(self, model: str, coefficients: Sequence[float], goal: Goal) -> None:
+        self.model = model
+        self.old = np.asarray(coefficients, dtype=np.float64)
+        self.goal = goal
+        self.terms = _term_matrix(model)
+        self.slope_terms = np.array([P.polyder(row) for row in self.terms])
+        self.old_curve = distortion_polynomial(model, coefficients)
+        self.old_slope = P.polyder(self.old_curve)
+        image = np.linspace(0.0, goal.r_corner, _GRID_POINTS)[1:]  # D(0) = 0 always
+        self.image_rows = np.stack([P.polyval(image, row) for row in self.terms], axis=1)
+
+    def solve(self, radius: float, extra: Sequence[float] = ()) -> Fit | None:
+        """The closest coefficients increasing up to ``radius`` (may be inf), or None."""
+        from scipy.optimize import linprog
+
+        count = len(self.old)
+        if math.isinf(radius):
+            # D' >= floor on [0, inf): with r = s / (1 - s), (1 - s)^k D'(r) is a
+            # polynomial in s, positive on [0, 1]; its value at s = 1 is D''s
+            # leading coefficient. Rows divided by (1 + r)^k = (1 - s)^-k stay bounded.
+            s = np.concatenate([np.linspace(0.0, 1.0, _GRID_POINTS), np.asarray(extra)])
+            s = s[(s >= 0) & (s <= 1)]
+            slope_rows, slope_limits = self._scaled_slopes(s)
+        else:
+            r = np.concatenate([np.linspace(0.0, radius, _GRID_POINTS), np.asarray(extra)])
+            r = r[(r >= 0) & (r <= radius)]
+            slope_rows = np.stack([P.polyval(r, row) for row in self.slope_terms], axis=1)
+            slope_limits = P.polyval(r, self.old_slope) - SLOPE_FLOOR
+        # Variables: the change of each coefficient, then t. All rows "<=".
+        ones = np.ones((self.image_rows.shape[0], 1))
+        blocks = [
+            np.hstack([self.image_rows, -ones]),
+            np.hstack([-self.image_rows, -ones]),
+            np.hstack([-slope_rows, np.zeros((slope_rows.shape[0], 1))]),
+        ]
+        limits = [np.zeros(2 * len(ones)), slope_limits]
+        if math.isfinite(radius):
+            reach_row = np.array([P.polyval(radius, row) for row in self.terms] + [0.0])
+            blocks.append(-reach_row[None, :])
+            needed = self.goal.reach * (1 + REACH_SLACK)
+            limits.append(np.array([P.polyval(radius, self.old_curve) - needed]))
+        objective = np.zeros(count + 1)
+        objective[-1] = 1.0
+        solution = linprog(
+            objective,
+            A_ub=np.vstack(blocks),
+            b_ub=np.concatenate(limits),
+            bounds=[(None, None)] * count + [(0, None)],
+            method="highs",
+        )
+        if solution.status != 0:
+            return None
+        change = solution.x[:count]
+        return Fit(tuple((self.old + change).tolist()), radius, float(solution.x[-1]))
+
+    def _scaled_slopes(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of (1 - s)^k D'(s / (1 - s)) >= (1 - s)^k floor, per unit change."""
+        degree = _SLOPE_DEGREE[self.model]
+        rows = np.stack([_scaled(row, s, degree) for row in self.slope_terms], axis=1)
+        limits = _scaled(self.old_slope, s, degree) - SLOPE_FLOOR * (1 - s) ** degree
+        return rows, limits
+
+    def slope_minimum(self, coefficients: Sequence[float], radius: float) -> list[float]:
+        """Grid points to add: where the slope of these coefficients is smallest."""
+        slope = P.polyder(distortion_polynomial(self.model, coefficients))
+        if math.isinf(radius):
+            s = np.linspace(0.0, 1.0, 20 * _GRID_POINTS)
+            values = _scaled(slope, s, _SLOPE_DEGREE[self.model])
+        else:
+            s = np.linspace(0.0, radius, 20 * _GRID_POINTS)
+            values = P.polyval(s, slope)
+        low = int(np.argmin(values))
+        step = s[1] - s[0]
+        return [float(s[low]), float(max(s[low] - step / 2, 0)), float(s[low] + step / 2)]
+
+
+def _scaled(polynomial: np.ndarray, s: np.ndarray, degree: int) -> np.ndarray:
+    """(1 - s)^degree p(s / (1 - s)) = sum_j p_j s^j (1 - s)^(degree - j), at s in [0, 1]."""
+    polynomial = np.trim_zeros(np.asarray(polynomial, dtype=np.float64), "b")
+    if polynomial.size > degree + 1:
+        raise ValueError("polynomial of higher degree than the model's slope")
+    total = np.zeros_like(s)
+    for power, coefficient in enumerate(polynomial):
+        total = total + coefficient * s**power * (1 - s) ** (degree - power)
+    return total
+
+
+def best_fit(model: str, coefficients: Sequence[float], goal: Goal) -> Fit | None:
+    """The linear program's best coefficients over the radius T, verified exactly.
+
+    None when no coefficients of the model meet the goal (or the program
+    cannot find them within its refinements).
+    """
+    program = _Program(model, coefficients, goal)
+    if math.isinf(goal.target):
+        candidates = [math.inf]
+    else:
+        candidates = _search_radius(program, goal.target)
+    for radius in candidates:
+        extra: list[float] = []
+        for _ in range(_REFINEMENTS):
+            fit = program.solve(radius, extra)
+            if fit is None:
+                break
+            if judge(model, fit.coefficients, goal).meets_goal:
+                return fit
+            extra += program.slope_minimum(fit.coefficients, radius)
+    return None
+
+
+def _search_radius(program: _Program, target: float) -> list[float]:
+    """Radii T to try, best first: a coarse scan of [target, 4 target], then a bounded search."""
+    from scipy.optimize import minimize_scalar
+
+    radii = np.geomspace(target, _SEARCH_SPAN * target, _SEARCH_POINTS)
+
+    def deviation(radius: float) -> float:
+        fit = program.solve(radius)
+        return math.inf if fit is None else fit.deviation
+
+    values = [deviation(float(r)) for r in radii]
+    order = sorted(range(len(radii)), key=values.__getitem__)
+    best = order[0]
+    if not math.isfinite(values[best]):
+        return [float(radii[i]) for i in order[:3]]
+    low = float(radii[max(best - 1, 0)])
+    high = float(radii[min(best + 1, len(radii) - 1)])
+    refined = minimize_scalar(
+        deviation, bounds=(low, high), method="bounded", options={"xatol": 1e-3 * target}
+    )
+    found = [float(refined.x)] if refined.fun < values[best] else []
+    return found + [float(radii[i]) for i in order[:3]]
+
+
+def decimals_of(text: str) -> int:
+    """Digits after the decimal point of a number as written, exponent included.
+
+    ``"-0.024"`` has 3, ``"-8.6e-05"`` 6, ``"12"`` 0.
+    """
+    mantissa, _, exponent = text.strip().lower().partition("e")
+    fraction = mantissa.partition(".")[2]
+    try:
+        shift = int(exponent) if exponent else 0
+    except ValueError:
+        shift = 0
+    return max(0, len(fraction) - shift)
+
+
+def format_like(value: float, decimals: int, template: str) -> str:
+    """``value`` rounded to ``decimals`` places, written in the style of ``template``.
+
+    Plain decimals (``-0.020930``) unless the template uses an exponent
+    (``-8.6e-05``); then the same exponent letter, sign and zero padding.
+    Never ``-0``.
+    """
+    exponent_letter = next((ch for ch in template if ch in "eE"), None)
+    if exponent_letter is None or value == 0:
+        text = f"{value:.{max(decimals, 0)}f}"
+    else:
+        magnitude = math.floor(math.log10(abs(value)))
+        text = f"{value:.{max(decimals + magnitude, 0)}e}"
+        mantissa, _, exponent = text.partition("e")
+        power = int(exponent)
+        written = template.strip().lower().partition("e")[2]
+        digits = written.lstrip("+-")
+        width = len(digits) if digits.startswith("0") else 1
+        sign = "-" if power < 0 else ("+" if written.startswith("+") else "")
+        text = f"{mantissa}{exponent_letter}{sign}{abs(power):0{width}d}"
+    if text.startswith("-") and float(text) == 0:
+        text = text[1:]
+    return text
+
+
+def rounded_texts(
+    values: Sequence[float], templates: Sequence[str], extra_digits: int = 0
+) -> list[str]:
+    """New coefficient texts: the entry's decimals, at least 5 significant digits.
+
+    ``templates`` are the entry's coefficient texts as written in the file
+    (``"0"`` for a missing one); ``extra_digits`` adds decimal places.
+    """
+    decimals = max(decimals_of(t) for t in templates)
+    texts = []
+    for value, template in zip(values, templates, strict=True):
+        places = decimals
+        if value != 0:
+            places = max(places, MIN_SIGNIFICANT_DIGITS - 1 - math.floor(math.log10(abs(value))))
+        texts.append(format_like(value, places + extra_digits, template))
+    return texts
+
+
+@dataclass(frozen=True)
+class FixResult:
+    """The outcome for one entry that folds.
+
+    ``old`` and ``new`` are the coefficients in the model's order (``names``);
+    ``new_texts`` are the new values as they would be written. ``new`` is
+    empty when no solution was found. r_max and r_normalized are in Hugin
+    units and ratios, as in ``lensaudit scan``; the changes of D are in pixels
+    of a 6000x4000 frame (:data:`PIXELS_PER_UNIT` per Hugin unit).
+    """
+
+    entry: DistortionEntry
+    names: tuple[str, ...]
+    old: tuple[float, ...]
+    old_texts: tuple[str, ...]
+    new: tuple[float, ...]
+    new_texts: tuple[str, ...]
+    goal: Goal
+    r_max_before: float
+    r_max_after: float
+    r_normalized_before: float
+    r_normalized_after: float
+    max_change_px: float
+    rms_change_px: float
+    status: str
+    message: str = ""
+    index: int = field(default=-1, compare=False)
+
+    @property
+    def where(self) -> str:
+        return f"{self.entry.file}:{self.entry.line}"
+
+    @property
+    def fixed(self) -> bool:
+        return self.status == STATUS_FIXED
+
+    def record(self) -> dict[str, Any]:
+        """The result as one flat row (see :data:`RECORD_COLUMNS`)."""
+        old = dict(zip(self.names, self.old, strict=True))
+        new = dict(zip(self.names, self.new_texts, strict=True))
+        entry = self.entry
+        row: dict[str, Any] = {
+            "file": entry.file,
+            "line": entry.line,
+            "maker": entry.maker,
+            "lens": entry.lens,
+            "focal": entry.focal,
+            "crop_factor": entry.crop_factor,
+            "model": entry.model,
+        }
+        for name in ("a", "b", "c", "k1", "k2"):
+            row[f"{name}_old"] = old.get(name, math.nan)
+        for name in ("a", "b", "c", "k1", "k2"):
+            row[f"{name}_new"] = new.get(name, "")
+        row.update(
+            r_max_before=self.r_max_before,
+            r_max_after=self.r_max_after,
+            r_normalized_before=self.r_normalized_before,
+            r_normalized_after=self.r_normalized_after,
+            target=self.goal.target,
+            max_change_px=self.max_change_px,
+            rms_change_px=self.rms_change_px,
+            status=self.status,
+            message=self.message,
+        )
+        return row
+
+
+#: Columns of :meth:`FixResult.record`, in order.
+RECORD_COLUMNS = (
+    "file", "line", "maker", "lens", "focal", "crop_factor", "model",
+    "a_old", "b_old", "c_old", "k1_old", "k2_old",
+    "a_new", "b_new", "c_new", "k1_new", "k2_new",
+    "r_max_before", "r_max_after", "r_normalized_before", "r_normalized_after", "target",
+    "max_change_px", "rms_change_px", "status", "message",
+)  # fmt: skip
+
+
+def coefficients_of(entry: DistortionEntry) -> tuple[float, ...]:
+    """The entry's coefficients in its model's order (a, b, c; k1; k1, k2)."""
+    return tuple(getattr(entry, name) for name in MODEL_COEFFICIENTS[entry.model])
+
+
+def fix_entry(
+    entry: DistortionEntry,
+    *,
+    margin: float = DEFAULT_MARGIN,
+    target: float | None = None,
+    tolerance: float = DEFAULT_TOLERANCE_PX,
+    texts: Mapping[str, str] | None = None,
+) -> FixResult:
+    """Refit one audited entry so that it no longer folds inside its image.
+
+    ``margin``: the r_normalized the new model must reach (1: the image
+    corner). ``target``: undistorted radius (Hugin units, may be ``inf``) up
+    to which the new model must increase; by default r_corner x margin, at
+    least r_corner. ``tolerance``: largest change of D over the image, in
+    pixels of a 6000x4000 frame, for the result to count as fixed.
+    ``texts``: the coefficient attributes as written in the file (their
+    decimals and style are kept); by default the shortest form of each value.
+    """
+    if entry.status != STATUS_OK or entry.model not in MODEL_COEFFICIENTS:
+        raise ValueError(f"{entry.file}:{entry.line}: entry was not audited ({entry.status})")
+    names = MODEL_COEFFICIENTS[entry.model]
+    old = coefficients_of(entry)
+    if texts is None:
+        texts = {name: repr(value) for name, value in zip(names, old, strict=True)}
+    old_texts = tuple(texts.get(name) or "0" for name in names)
+    goal = goal_for(entry.aspect_ratio, margin, target)
+    before = judge(entry.model, old, goal)
+    common = dict(
+        entry=entry,
+        names=names,
+        old=old,
+        old_texts=old_texts,
+        goal=goal,
+        r_max_before=before.r_max,
+        r_normalized_before=before.r_normalized,
+    )
+    fit = best_fit(entry.model, old, goal)
+    if fit is None:
+        return FixResult(
+            **common,
+            new=(),
+            new_texts=(),
+            r_max_after=math.nan,
+            r_normalized_after=math.nan,
+            max_change_px=math.nan,
+            rms_change_px=math.nan,
+            status=STATUS_NO_SOLUTION,
+            message=f"no {entry.model} coefficients are increasing up to r = "
+            f"{goal.target:.4g} and reach {goal.reach:.4g} before folding",
+        )
+    for extra in range(_EXTRA_DIGITS + 1):
+        new_texts = rounded_texts(fit.coefficients, old_texts, extra)
+        new = tuple(float(t) for t in new_texts)
+        after = judge(entry.model, new, goal)
+        if after.meets_goal:
+            break
+    else:
+        new_texts = [repr(v) for v in fit.coefficients]
+        new = fit.coefficients
+        after = judge(entry.model, new, goal)
+    change = change_of_distortion(entry.model, old, new, entry.aspect_ratio)
+    status, message = STATUS_FIXED, ""
+    if change.max_px > tolerance:
+        status = STATUS_BEYOND_TOLERANCE
+        message = (
+            f"the closest {entry.model} curve without the fold changes D by up to "
+            f"{change.max_px:.0f} px over the image, more than the {tolerance:g} px "
+            f"tolerance ({FRAME} frame): the model folds at D = {before.d_max:.3g}, "
+            f"{before.r_normalized:.0%} of the corner radius {goal.r_corner:.3g}"
+        )
+        if len(names) == 1:
+            message += f"; {entry.model} has a single coefficient"
+    return FixResult(
+        **common,
+        new=new,
+        new_texts=tuple(new_texts),
+        r_max_after=after.r_max,
+        r_normalized_after=after.r_normalized,
+        max_change_px=change.max_px,
+        rms_change_px=change.rms_px,
+        status=status,
+        message=message,
+    )
+
+
+def select(
+    audit: Audit,
+    *,
+    margin: float = DEFAULT_MARGIN,
+    lens: str | None = None,
+    focal: float | None = None,
+) -> list[int]:
+    """Indices of audited entries with r_normalized < margin, optionally filtered.
+
+    ``lens`` matches "maker lens" as a case-insensitive substring; ``focal``
+    the calibrated focal length in millimetres.
+    """
+    m = audit.metrics
+    with np.errstate(invalid="ignore"):
+        folding = audit.audited & np.isfinite(m.r_max) & (m.r_normalized < margin)
+    chosen = []
+    needle = lens.casefold() if lens else None
+    for index in np.flatnonzero(folding).tolist():
+        entry = audit.entries[index]
+        if needle is not None and needle not in f"{entry.maker} {entry.lens}".casefold():
+            continue
+        if focal is not None and not math.isclose(entry.focal, focal, rel_tol=1e-9):
+            continue
+        chosen.append(index)
+    return chosen
+
+
+def _matches(entry: DistortionEntry) -> Any:
+    """A test on raw attribute texts: are these the entry's model, focal and coefficients?"""
+
+    def same(values: Mapping[str, str]) -> bool:
+        if (values.get("model") or "").strip() != entry.model:
+            return False
+        try:
+            if parse_number(values.get("focal")) != entry.focal:
+                return False
+            return all(
+                parse_number(values.get(name, "0")) == getattr(entry, name)
+                for name in MODEL_COEFFICIENTS[entry.model]
+            )
+        except ValueError:
+            return False
+
+    return same
+
+
+@dataclass
+class SourceTexts:
+    """The files behind some entries: their bytes, and each entry's start tag."""
+
+    files: dict[str, tuple[Any, bytes]] = field(default_factory=dict)  # name -> (path, bytes)
+    tags: dict[int, StartTag] = field(default_factory=dict)  # entry index -> tag
+
+    def texts(self, index: int) -> dict[str, str]:
+        """The raw attribute values of an entry's ``<distortion>``."""
+        return self.tags[index].values()
+
+
+def read_sources(audit: Audit, indices: Sequence[int]) -> SourceTexts:
+    """Read the files of the given entries and find each entry's start tag.
+
+    Raises :class:`lensaudit.xmlpatch.PatchError`, its message naming the
+    file and line, when an entry is not where the audit found it (the file
+    changed since) or its file cannot be read.
+    """
+    from . import xmlpatch
+    from .loader import read_file
+
+    paths = {f.name: f.path for f in audit.files}
+    sources = SourceTexts()
+    for index in indices:
+        entry = audit.entries[index]
+        if entry.file not in sources.files:
+            try:
+                sources.files[entry.file] = (paths[entry.file], read_file(paths[entry.file]))
+            except OSError as error:
+                raise xmlpatch.PatchError(
+                    f"{entry.file}: cannot read: {error.strerror or error}"
+                ) from None
+        data = sources.files[entry.file][1]
+        try:
+            sources.tags[index] = xmlpatch.locate(data, "distortion", entry.line, _matches(entry))
+        except xmlpatch.PatchError as error:
+            raise xmlpatch.PatchError(
+                f"{entry.file}:{entry.line}: {error}; the file changed since it was read "
+                "(run again), or writes the element in a form this command does not patch"
+            ) from None
+    return sources
+
+
+def fix_audit(
+    audit: Audit,
+    indices: Sequence[int],
+    *,
+    margin: float = DEFAULT_MARGIN,
+    target: float | None = None,
+    tolerance: float = DEFAULT_TOLERANCE_PX,
+    sources: SourceTexts | None = None,
+) -> list[FixResult]:
+    """:func:`fix_entry` for the given entries of an audit (see :func:`select`).
+
+    With ``sources`` (:func:`read_sources`), the number format of each entry
+    is taken from its file.
+    """
+    results = []
+    for index in indices:
+        texts = sources.texts(index) if sources is not None else None
+        result = fix_entry(
+            audit.entries[index], margin=margin, target=target, tolerance=tolerance, texts=texts
+        )
+        results.append(_with_index(result, index))
+    return results
+
+
+def _with_index(result: FixResult, index: int) -> FixResult:
+    from dataclasses import replace
+
+    return replace(result, index=index)
+
+
+def patches(results: Sequence[FixResult], sources: SourceTexts) -> list[FilePatch]:
+    """The file changes that write the fixed entries: one patch per file.
+
+    Only entries with status ``fixed`` are written; only their coefficient
+    attributes change.
+    """
+    from .xmlpatch import FilePatch, set_attributes
+
+    edits: dict[str, list] = {}
+    for result in results:
+        if not result.fixed:
+            continue
+        values = dict(zip(result.names, result.new_texts, strict=True))
+        edits.setdefault(result.entry.file, []).append((sources.tags[result.index], values))
+    found = []
+    for name, file_edits in edits.items():
+        path, data = sources.files[name]
+        found.append(FilePatch(path, name, data, set_attributes(data, file_edits)))
+    return found
+
+
+def fix(
+    paths: Sequence[str] | str | None = None,
+    *,
+    margin: float = DEFAULT_MARGIN,
+    target: float | None = None,
+    tolerance: float = DEFAULT_TOLERANCE_PX,
+    lens: str | None = None,
+    focal: float | None = None,
+) -> tuple[list[FixResult], list[FilePatch]]:
+    """Fix every entry of a database that folds inside its image.
+
+    Returns the results and the file patches that would write them (see
+    :func:`lensaudit.xmlpatch.write`); nothing is written here.
+    """
+    from .pipeline import run
+
+    audit = run(paths)
+    indices = select(audit, margin=margin, lens=lens, focal=focal)
+    sources = read_sources(audit, indices)
+    results = fix_audit(
+        audit, indices, margin=margin, target=target, tolerance=tolerance, sources=sources
+    )
+    return results, patches(results, sources)
+
+
+def to_dataframe(results: Sequence[FixResult]) -> pandas.DataFrame:
+    """The results as a pandas DataFrame with :data:`RECORD_COLUMNS`."""
+    import pandas
+
+    return pandas.DataFrame([r.record() for r in results], columns=list(RECORD_COLUMNS))
