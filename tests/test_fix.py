@@ -1,0 +1,449 @@
+"""`lensaudit fix`: refitted models checked in exact arithmetic, patches byte by byte.
+
+References are independent of lensaudit.fix: the models' D(r) are written
+out here from Lensfun's formulas with the coefficients as exact rationals
+(sympy), "increasing up to the target" is the absence of real roots of D'
+in (0, target], the maximum change of D is found from the exact critical
+points, and the RMS change over the image by scipy's adaptive quadrature.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+import shutil
+from fractions import Fraction
+
+import pytest
+import sympy
+from click.testing import CliRunner
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from conftest import lens_xml
+from lensaudit import fix
+from lensaudit.cli import main
+from lensaudit.loader import STATUS_OK, load, load_bytes
+from lensaudit.metrics import compute
+from lensaudit.pipeline import run
+from lensaudit.xmlpatch import PatchError, write
+
+R = sympy.Symbol("r", positive=True)
+PX_PER_UNIT = 2000  # half the short side of a 6000 x 4000 frame
+TOLERANCE = 50.0
+
+
+def exact_d(model: str, texts: dict[str, str]) -> sympy.Poly:
+    """D(r) from Lensfun's formulas, coefficients exactly as written."""
+    q = {name: sympy.Rational(Fraction(text)) for name, text in texts.items()}
+    if model == "ptlens":
+        a, b, c = q["a"], q["b"], q["c"]
+        return sympy.Poly(R * (a * R**3 + b * R**2 + c * R + 1 - a - b - c), R)
+    if model == "poly3":
+        return sympy.Poly(R * (1 - q["k1"] + q["k1"] * R**2), R)
+    return sympy.Poly(R * (1 + q["k1"] * R**2 + q["k2"] * R**4), R)
+
+
+def exact_corner(aspect: float) -> sympy.Expr:
+    ratio = sympy.Rational(Fraction(aspect).limit_denominator(1000))
+    return sympy.sqrt(ratio**2 + 1)
+
+
+def increasing_up_to(d: sympy.Poly, target: float) -> bool:
+    """D' > 0 on [0, target] (target may be inf), decided exactly."""
+    slope = d.diff(R)
+    if not slope.eval(0) > 0:
+        return False
+    limit = sympy.oo if math.isinf(target) else sympy.Rational(Fraction(target))
+    return not any(0 < root <= limit for root in sympy.real_roots(slope))
+
+
+def reach_before_fold(d: sympy.Poly) -> sympy.Expr:
+    """D at its first local maximum (exact algebraic number), or oo."""
+    slope = d.diff(R)
+    positive = [root for root in sympy.real_roots(slope) if root > 0]
+    if not positive:
+        return sympy.oo if d.LC() > 0 else d.eval(0)
+    return d.eval(min(positive))
+
+
+def texts_of(result, new: bool) -> dict[str, str]:
+    return dict(zip(result.names, result.new_texts if new else result.old_texts, strict=True))
+
+
+@pytest.fixture(scope="module")
+def database(bundled_db, tmp_path_factory):
+    """A copy of the bundled database, fixed with the default settings (not written)."""
+    copy = tmp_path_factory.mktemp("fix") / "db"
+    shutil.copytree(bundled_db, copy)
+    results, patches = fix.fix(str(copy))
+    return copy, results, patches
+
+
+@pytest.fixture(scope="module")
+def results(database):
+    return database[1]
+
+
+@pytest.fixture(scope="module")
+def patched(database, tmp_path_factory):
+    """A second copy with the patches written: (directory, original bytes by name)."""
+    source, _, patches = database
+    copy = tmp_path_factory.mktemp("patched") / "db"
+    shutil.copytree(source, copy)
+    originals = {}
+    for patch in patches:
+        path = copy / patch.name
+        originals[patch.name] = path.read_bytes()
+        write(type(patch)(path, patch.name, patch.original, patch.patched))
+    return copy, originals
+
+
+def test_the_seven_entries_that_fold_in_their_image_are_examined(results):
+    # README: the bundled database has 7 entries that fold inside their image.
+    assert len(results) == 7
+    lenses = {r.entry.lens for r in results}
+    assert "Tokina 11-16mm f/2.8 AT-X 116 AF Pro DX" in lenses
+    assert "Sigma 4.5mm f/2.8 EX DC HSM circular fisheye" in lenses
+
+
+def test_every_folding_entry_is_fixed_or_says_why(results):
+    for result in results:
+        if result.status == fix.STATUS_FIXED:
+            assert result.max_change_px <= TOLERANCE and result.message == ""
+        else:
+            assert result.status == fix.STATUS_BEYOND_TOLERANCE, result.where
+            assert f"{result.max_change_px:.0f} px" in result.message
+            assert "50 px tolerance" in result.message
+
+
+def test_the_rectilinear_ptlens_entries_are_fixed_within_tolerance(results):
+    rectilinear = [
+        r for r in results if r.entry.type == "rectilinear" and r.entry.model == "ptlens"
+    ]
+    assert len(rectilinear) == 3
+    assert all(r.status == fix.STATUS_FIXED for r in rectilinear)
+
+
+def test_new_coefficients_increase_up_to_the_target_exactly(results):
+    for result in results:
+        d = exact_d(result.entry.model, texts_of(result, new=True))
+        assert increasing_up_to(d, result.goal.target), result.where
+        assert result.goal.target >= float(exact_corner(result.entry.aspect_ratio)) * (1 - 1e-15)
+
+
+def test_the_old_coefficients_fold_before_reaching_the_corner_exactly(results):
+    for result in results:
+        d = exact_d(result.entry.model, texts_of(result, new=False))
+        corner = exact_corner(result.entry.aspect_ratio)
+        assert reach_before_fold(d) < corner, result.where
+
+
+def test_new_coefficients_reach_the_image_corner_before_folding_exactly(results):
+    for result in results:
+        d = exact_d(result.entry.model, texts_of(result, new=True))
+        corner = exact_corner(result.entry.aspect_ratio)
+        assert sympy.N(reach_before_fold(d) - corner, 30) >= 0, result.where
+
+
+def test_the_reported_maximum_change_is_the_exact_maximum(results):
+    for result in results:
+        change = exact_d(result.entry.model, texts_of(result, new=True)) - exact_d(
+            result.entry.model, texts_of(result, new=False)
+        )
+        corner = exact_corner(result.entry.aspect_ratio)
+        points = [sympy.Integer(0), corner] + [
+            root for root in sympy.real_roots(change.diff(R)) if 0 < root < corner
+        ]
+        largest = max(abs(sympy.N(change.as_expr().subs(R, p), 30)) for p in points)
+        assert result.max_change_px == pytest.approx(float(largest) * PX_PER_UNIT, rel=1e-9)
+
+
+def test_the_reported_rms_change_is_the_mean_over_the_image(results):
+    from scipy.integrate import dblquad
+
+    for result in results[:3]:
+        change = sympy.lambdify(
+            R,
+            (
+                exact_d(result.entry.model, texts_of(result, new=True))
+                - exact_d(result.entry.model, texts_of(result, new=False))
+            ).as_expr(),
+        )
+        aspect = result.entry.aspect_ratio
+        integral, _ = dblquad(
+            lambda y, x, f=change: f(math.hypot(x, y)) ** 2, 0, aspect, 0, 1, epsabs=0, epsrel=1e-11
+        )
+        expected = math.sqrt(integral / aspect) * PX_PER_UNIT
+        assert result.rms_change_px == pytest.approx(expected, rel=1e-7)
+
+
+def significant_digits(text: str) -> int:
+    mantissa = text.lower().partition("e")[0].lstrip("+-").replace(".", "")
+    return len(mantissa.lstrip("0"))
+
+
+def written_decimals(text: str) -> int:
+    mantissa, _, exponent = text.lower().partition("e")
+    return len(mantissa.partition(".")[2]) - int(exponent or 0)
+
+
+def test_new_coefficients_keep_the_files_decimals_and_five_significant_digits(results):
+    for result in results:
+        decimals = max(written_decimals(t) for t in result.old_texts)
+        for text in result.new_texts:
+            assert written_decimals(text) >= decimals, (result.where, text)
+            if float(text) != 0:
+                assert significant_digits(text) >= 5, (result.where, text)
+
+
+def test_writing_changes_only_the_coefficient_values(database, patched):
+    directory, originals = patched
+    _, results, _ = database
+    assert len(originals) == sum(r.status == fix.STATUS_FIXED for r in results)
+    for name, original in originals.items():
+        expected = original.decode("utf-8").split("\n")
+        for result in results:
+            if result.entry.file != name or result.status != fix.STATUS_FIXED:
+                continue
+            line = expected[result.entry.line - 1]
+            for attribute, old, new in zip(
+                result.names, result.old_texts, result.new_texts, strict=True
+            ):
+                assert line.count(f' {attribute}="{old}"') == 1
+                line = line.replace(f' {attribute}="{old}"', f' {attribute}="{new}"')
+            expected[result.entry.line - 1] = line
+        assert (directory / name).read_bytes() == "\n".join(expected).encode("utf-8")
+
+
+def test_the_patched_database_no_longer_folds_where_fixed(database, patched):
+    _, results, _ = database
+    audit = run(str(patched[0]))
+    flags = audit.metrics.folds_in_image
+    folding = {(e.file, e.line) for e, f in zip(audit.entries, flags, strict=True) if f}
+    for result in results:
+        assert ((result.entry.file, result.entry.line) in folding) != result.fixed
+
+
+def test_fixing_twice_changes_nothing_the_second_time(patched):
+    directory, _ = patched
+    before = {p.name: p.read_bytes() for p in directory.iterdir()}
+    results, patches = fix.fix(str(directory))
+    assert all(r.status != fix.STATUS_FIXED for r in results)
+    assert not any(p.changed for p in patches)
+    assert {p.name: p.read_bytes() for p in directory.iterdir()} == before
+
+
+def entry_from(xml: str, tmp_path, **options):
+    path = tmp_path / "one.xml"
+    path.write_text(xml)
+    audit = run(str(path))
+    indices = fix.select(audit, margin=options.get("margin", 1.0))
+    assert len(indices) == 1
+    sources = fix.read_sources(audit, indices)
+    (result,) = fix.fix_audit(audit, indices, sources=sources, **options)
+    return path, result, fix.patches([result], sources)
+
+
+def test_an_infinite_target_gives_a_model_that_never_folds(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    _, result, _ = entry_from(xml, tmp_path, target=math.inf, tolerance=math.inf)
+    assert result.status == fix.STATUS_FIXED and math.isinf(result.r_max_after)
+    assert increasing_up_to(exact_d("ptlens", texts_of(result, new=True)), math.inf)
+
+
+def test_a_margin_above_one_reaches_beyond_the_corner(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    _, result, _ = entry_from(xml, tmp_path, margin=1.1, tolerance=math.inf)
+    corner = exact_corner(1.5)
+    d = exact_d("ptlens", texts_of(result, new=True))
+    assert increasing_up_to(d, float(sympy.N(corner * sympy.Rational(11, 10), 30)) + 1e-12)
+    assert sympy.N(reach_before_fold(d) - corner * sympy.Rational(11, 10), 30) >= 0
+
+
+def test_a_poly5_model_is_refitted_as_poly5(tmp_path):
+    xml = lens_xml('<distortion model="poly5" focal="10" k1="-0.1" k2="-0.01"/>')
+    _, result, patches = entry_from(xml, tmp_path, tolerance=math.inf)
+    assert result.names == ("k1", "k2") and result.status == fix.STATUS_FIXED
+    d = exact_d("poly5", texts_of(result, new=True))
+    assert increasing_up_to(d, result.goal.target)
+    assert sympy.N(reach_before_fold(d) - exact_corner(1.5), 30) >= 0
+    assert len(patches) == 1
+
+
+def test_a_coefficient_missing_from_the_file_is_added(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.03" c="0.005"/>')
+    path, result, patches = entry_from(xml, tmp_path, tolerance=math.inf)
+    assert result.old_texts == ("-0.03", "0", "0.005")
+    write(patches[0])
+    (entry,) = load(path).entries
+    assert entry.status == STATUS_OK
+    assert (entry.a, entry.b, entry.c) == tuple(float(t) for t in result.new_texts)
+    new_line = path.read_text().splitlines()[entry.line - 1]
+    assert re.search(r' c="[-0-9.]+" b="[-0-9.]+"/>', new_line)
+
+
+def test_an_entry_moved_since_the_audit_is_refused(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    path = tmp_path / "one.xml"
+    path.write_text(xml)
+    audit = run(str(path))
+    path.write_text("\n" + xml)
+    with pytest.raises(PatchError, match=r"one\.xml:\d+: .*changed since it was read"):
+        fix.read_sources(audit, fix.select(audit))
+
+
+def test_a_file_changed_between_reading_and_writing_is_not_written(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    path, _, patches = entry_from(xml, tmp_path)
+    path.write_text(xml + "<!-- edited -->\n")
+    with pytest.raises(PatchError, match="changed since it was read"):
+        write(patches[0])
+    assert path.read_text() == xml + "<!-- edited -->\n"
+
+
+@pytest.mark.parametrize(
+    ("value", "decimals", "template", "expected"),
+    [
+        (-0.0209301, 6, "-0.024", "-0.020930"),
+        (0.18055, 5, "0.188", "0.18055"),
+        (-8.61234e-05, 9, "-8.6e-05", "-8.6123e-05"),
+        (1.5e-3, 5, "2E-4", "1.50E-3"),
+        (-1e-9, 3, "0.000", "0.000"),
+    ],
+)
+def test_numbers_are_written_in_the_files_style(value, decimals, template, expected):
+    assert fix.format_like(value, decimals, template) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "decimals"), [("-0.024", 3), ("-8.6e-05", 6), ("12", 0), ("1.5e3", 0)]
+)
+def test_decimals_count_the_exponent(text, decimals):
+    assert fix.decimals_of(text) == decimals
+
+
+_coefficient = st.decimals(min_value=-1, max_value=1, places=4).map(str)
+
+
+@settings(max_examples=12, deadline=None)
+@given(_coefficient, _coefficient, _coefficient, st.sampled_from([1.5, 4 / 3]))
+def test_any_ptlens_fold_is_refitted_to_meet_its_goal_exactly(a, b, c, aspect):
+    m = compute(
+        ["ptlens"], [float(a)], [float(b)], [float(c)], [0], [0], [1], [aspect], [10], [True]
+    )
+    assume(
+        bool(m.folds_in_image[0])
+        and float(Fraction(1) - Fraction(a) - Fraction(b) - Fraction(c)) > 0.05
+    )
+    text = (
+        f"<lensdatabase><lens><maker>T</maker><model>T</model><aspect-ratio>{aspect!r}</aspect-ratio>"
+        f'<calibration><distortion model="ptlens" focal="10" a="{a}" b="{b}" c="{c}"/>'
+        "</calibration></lens></lensdatabase>"
+    )
+    (entry,) = load_bytes(text.encode(), "t.xml")
+    result = fix.fix_entry(entry, tolerance=math.inf, texts={"a": a, "b": b, "c": c})
+    assert result.status == fix.STATUS_FIXED, result.message
+    d = exact_d("ptlens", texts_of(result, new=True))
+    assert increasing_up_to(d, result.goal.target)
+    assert sympy.N(reach_before_fold(d) - exact_corner(aspect), 30) >= 0
+
+
+# The command line.
+
+
+@pytest.fixture
+def runner():
+    return CliRunner()
+
+
+def test_help_states_the_frame_and_exit_status(runner):
+    result = runner.invoke(main, ["fix", "--help"])
+    assert result.exit_code == 0
+    assert "6000x4000" in result.output and "Exit status" in result.output
+
+
+def test_fix_is_listed_among_the_commands(runner):
+    assert "fix" in runner.invoke(main, ["--help"]).output
+
+
+def test_a_missing_path_is_one_line_and_exit_2(runner, tmp_path):
+    result = runner.invoke(main, ["fix", str(tmp_path / "nope")])
+    assert result.exit_code == 2
+    assert result.output.strip().count("\n") == 0 and "no such file" in result.output
+
+
+@pytest.mark.parametrize(
+    "option", [["--margin", "0"], ["--margin", "nan"], ["--target", "-1"], ["--tolerance", "-5"]]
+)
+def test_bad_numbers_are_one_line_and_exit_2(runner, option, tmp_path):
+    result = runner.invoke(main, ["fix", str(tmp_path), *option])
+    assert result.exit_code == 2
+    assert result.output.startswith("lensaudit: error: " + option[0])
+
+
+def test_writing_the_bundled_database_is_refused(runner):
+    result = runner.invoke(main, ["fix", "--write"])
+    assert result.exit_code == 2 and "give the database PATH" in result.output
+
+
+def test_the_command_prints_a_diff_and_writes_nothing(runner, tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    (tmp_path / "db").mkdir()
+    path = tmp_path / "db" / "one.xml"
+    path.write_text(xml)
+    result = runner.invoke(main, ["fix", str(path.parent)])
+    assert result.exit_code == 0, result.output
+    assert "--- a/one.xml" in result.output and "1 fixed, 0 not fixed" in result.output
+    assert path.read_text() == xml
+
+
+def test_write_then_run_again_is_a_no_op(runner, tmp_path):
+    xml = lens_xml(
+        '<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>',
+        '<distortion model="poly3" focal="14" k1="-0.079"/>',
+    )
+    (tmp_path / "db").mkdir()
+    path = tmp_path / "db" / "one.xml"
+    path.write_text(xml)
+    first = runner.invoke(main, ["fix", str(path.parent), "--write", "--tolerance", "1000"])
+    assert first.exit_code == 0, first.output
+    assert "Written: one.xml" in first.output
+    after = path.read_bytes()
+    assert after != xml.encode()
+    second = runner.invoke(main, ["fix", str(path.parent), "--write"])
+    assert second.exit_code == 0
+    assert "0 entries with r_normalized < 1" in second.output
+    assert path.read_bytes() == after
+
+
+def test_csv_has_one_row_per_folding_entry(runner, tmp_path):
+    xml = lens_xml(
+        '<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>',
+        '<distortion model="poly3" focal="14" k1="0.01"/>',
+        '<distortion model="poly3" focal="18" k1="-0.079"/>',
+    )
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "one.xml").write_text(xml)
+    result = runner.invoke(main, ["fix", str(tmp_path / "db"), "-f", "csv"])
+    rows = list(csv.DictReader(io.StringIO(result.output)))
+    assert [(r["focal"], r["model"], r["status"]) for r in rows] == [
+        ("11.0", "ptlens", "fixed"),
+        ("18.0", "poly3", "beyond_tolerance"),
+    ]
+    assert rows[0]["a_new"] and rows[0]["k1_new"] == "" and rows[0]["c_old"] == "0.005"
+
+
+def test_json_holds_results_and_diff(runner, tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "one.xml").write_text(xml)
+    result = runner.invoke(main, ["fix", str(tmp_path / "db"), "-f", "json"])
+    document = json.loads(result.output)
+    (entry,) = document["entries"]
+    assert entry["status"] == "fixed" and isinstance(entry["a_new"], float)
+    assert document["diff"].startswith("--- a/one.xml")
+    assert "6000x4000" in document["units"]["changes"]
