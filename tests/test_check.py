@@ -174,10 +174,10 @@ def test_a_calibration_is_one_lens_with_one_crop_factor_and_aspect_ratio(write_x
     assert codes(check(write_xml(CALIBRATIONS))) == [("error", "duplicate-focal", 11)]
 
 
-def lens(maker: str, model: str, crop: str) -> str:
+def lens(maker: str, model: str, crop: str, mount: str = "Mount A") -> str:
     return (
         f"  <lens>\n    <maker>{maker}</maker>\n    <model>{model}</model>\n"
-        f"    <cropfactor>{crop}</cropfactor>\n  </lens>\n"
+        f"    <cropfactor>{crop}</cropfactor><mount>{mount}</mount>\n  </lens>\n"
     )
 
 
@@ -188,7 +188,7 @@ def database(*lenses: str) -> str:
 def test_lens_defined_twice_is_an_error_at_the_second_definition(write_xml):
     write_xml(database(lens("Test", "Lens A", "1.5")), "a.xml")
     db = write_xml(
-        database(lens("Test", "Lens B", "1.5"), lens("Test", "Lens A", "1.50")), "b.xml"
+        database(lens("Test", "Lens B", "1.5"), lens("Test", "Lens A", "1.50", "Mount B")), "b.xml"
     ).parent
     result = check(db)
     assert [(f.code, Path(f.file).name, f.line) for f in result.findings] == [
@@ -199,7 +199,9 @@ def test_lens_defined_twice_is_an_error_at_the_second_definition(write_xml):
 
 
 def test_lens_names_are_compared_ignoring_case_and_runs_of_spaces(write_xml):
-    result = check(write_xml(database(lens("Test", "Lens  A", "1"), lens("TEST", " lens a ", "1"))))
+    result = check(
+        write_xml(database(lens("Test", "Lens  A", "1"), lens("TEST", " lens a ", "1", "Mount B")))
+    )
     assert codes(result) == [("error", "duplicate-lens", 7)]
 
 
@@ -307,9 +309,9 @@ def test_fixed_entry_counts_as_resolved(two_databases):
     assert result.findings == [] and result.resolved == 1 and not result.failed
 
 
-def test_adding_a_second_copy_of_a_known_duplicate_fails(two_databases):
-    twice = [FINE, FINE]
-    before, after = two_databases(twice, twice + [FINE])
+def test_adding_a_third_entry_for_a_known_duplicate_focal_fails(two_databases):
+    twice = [FINE, FINE.replace("0.01", "0.02")]
+    before, after = two_databases(twice, twice + [FINE.replace("0.01", "0.03")])
     result = check(after, baseline=before)
     assert [(f.code, f.known) for f in result.findings] == [
         ("duplicate-focal", True),
@@ -421,9 +423,10 @@ def test_analyse_gives_each_finding_an_identity_for_baseline_matching(write_xml)
     path = write_xml(lens_xml(FOLDING))
     files, findings = checking.analyse(checking.sources_from_paths([path]))
     assert [f.entries for f in files] == [1]
-    [(finding, identity, name)] = findings
-    assert identity[0] == finding.code == "fold-in-image"
-    assert name == path.name
+    [(finding, identity, content, names)] = findings
+    assert finding.code == "fold-in-image"
+    assert identity[:2] == content[:2] == ("error", "fold-in-image")
+    assert names == (path.name,)
 
 
 def test_entry_whose_r_max_cannot_be_computed_is_an_error_and_the_others_are_checked(

@@ -136,6 +136,7 @@ def test_json_has_verdict_counts_files_and_findings():
         "entry_key": ["Maker", "Lens", 1.5, "poly3", 10.0],
         "known": False,
         "fails": True,
+        "related": [],
     }
     assert document["findings"][2]["known"] and not document["findings"][2]["fails"]
 

@@ -11,20 +11,34 @@ sentence. Errors make the check fail; warnings and notices do not.
   any other finite r_max. r_normalized = D(r_max) / hypot(aspect, 1), both in
   Hugin units (1 = half the short side of the calibration image).
 - Input (errors): ``xml-error`` (the file is not well-formed XML; its entries
-  are counted but not checked further), ``unreadable``, ``missing-attribute``,
+  are counted but not checked further), ``not-a-database`` (well-formed, but
+  its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
   ``bad-value`` (not a finite number, focal or crop factor <= 0),
-  ``unknown-model``, ``no-lens``, ``duplicate-lens`` (maker, model and crop
-  factor of an earlier ``<lens>``, names compared ignoring letter case and
-  runs of white space), ``duplicate-focal`` (a second ``<distortion>`` for
-  the same focal length in one calibration), ``r-max-not-computable``.
+  ``unknown-model``, ``no-lens``, ``r-max-not-computable``.
+- Duplicates: ``duplicate-lens`` (maker, model and crop factor of an earlier
+  ``<lens>``, names compared ignoring letter case and runs of white space)
+  and ``duplicate-focal`` (a second ``<distortion>`` for the same focal
+  length in one calibration) are errors, or warnings when the two are
+  identical, since liblensfun then loses nothing by keeping one of them.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
-tree is never touched), a finding that the baseline has too is marked
-``known`` and does not fail the check. Entries are matched by (maker, lens,
-crop factor, model, focal), not by line: a finding is known when an entry
-with the same key and the same values had the same finding in the baseline,
-so only new and changed entries can fail.
+tree is never touched), a finding is new only when the baseline has no
+finding with the same severity, code and identity; the others are ``known``
+and never fail the check. Identity is content, never position: an entry is
+its lens (maker and model, compared ignoring case and all white space) and
+its own values (model, focal length, crop factor, aspect ratio, type,
+coefficients); a duplicate is the entry or lens that repeats, with its
+content; a file-level finding is the file's name and the problem. Findings
+that the baseline matches by identity are known first; the rest may still
+match a baseline finding by content alone, so that renaming a lens does not
+make its findings new, while a copy of a known entry under a new lens is new.
+
+A baseline file that cannot be parsed is replaced by its last readable
+version in the git history (among the last :data:`HISTORY_DEPTH` commits that
+changed it), and a ``baseline-unreadable`` notice says so. Without one (or
+for a directory baseline), the findings in that file are not counted as new,
+and the notice says that too.
 """
 
 from __future__ import annotations
@@ -32,10 +46,12 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 import subprocess
 from collections.abc import Hashable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -50,11 +66,16 @@ SEVERITIES = (SEVERITY_ERROR, SEVERITY_WARNING, SEVERITY_NOTICE)
 #: r_normalized below which a fold just outside the image is a warning.
 DEFAULT_MARGIN = 1.1
 
+#: How many commits that changed a file are searched for a version that parses,
+#: when the baseline's version does not.
+HISTORY_DEPTH = 50
+
 FOLD_IN_IMAGE = "fold-in-image"
 FOLD_NEAR_IMAGE = "fold-near-image"
 FOLD_OUTSIDE_IMAGE = "fold-outside-image"
 NOT_COMPUTABLE = "r-max-not-computable"
 XML_ERROR = "xml-error"
+NOT_A_DATABASE = "not-a-database"
 UNREADABLE = "unreadable"
 MISSING_ATTRIBUTE = "missing-attribute"
 BAD_VALUE = "bad-value"
@@ -62,6 +83,10 @@ UNKNOWN_MODEL = "unknown-model"
 NO_LENS = "no-lens"
 DUPLICATE_LENS = "duplicate-lens"
 DUPLICATE_FOCAL = "duplicate-focal"
+BASELINE_UNREADABLE = "baseline-unreadable"
+
+#: Findings about a whole file.
+FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
 
 _STATUS_CODES = {
     loader.STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
@@ -69,6 +94,7 @@ _STATUS_CODES = {
     loader.STATUS_UNKNOWN_MODEL: UNKNOWN_MODEL,
     loader.STATUS_NO_LENS: NO_LENS,
     loader.STATUS_UNREADABLE: UNREADABLE,
+    loader.STATUS_NOT_DATABASE: NOT_A_DATABASE,
 }
 
 #: Longest name and message put into a finding; hostile files can hold megabytes.
@@ -91,7 +117,8 @@ class Finding:
     model, focal) for an entry, (maker, lens, crop factor) for a lens and ()
     for a whole file; NaN values are None, names over :data:`NAME_LIMIT`
     characters are cut. ``known`` findings were already in the baseline and
-    never fail the check.
+    never fail the check. ``related`` holds the (file, line) of the other
+    element a duplicate repeats.
     """
 
     severity: str
@@ -102,6 +129,7 @@ class Finding:
     message: str
     entry_key: tuple = ()
     known: bool = False
+    related: tuple[tuple[str, int], ...] = ()
 
     @property
     def fails(self) -> bool:
@@ -153,19 +181,38 @@ class CheckResult:
             counts["known" if finding.known else finding.severity] += 1
         return counts
 
-    def relative_to(self, root: str | os.PathLike[str]) -> CheckResult:
-        """The same result with file paths relative to ``root`` where they lie under it.
+    def relative_to(self, *roots: str | os.PathLike[str]) -> CheckResult:
+        """The same result with file paths relative to the deepest of ``roots``
+        that holds each file; files under none of them keep their paths.
 
-        GitHub places annotations by paths relative to the repository root.
+        CI systems (GitHub's annotations, JUnit viewers) place findings by
+        paths relative to the repository root.
         """
-        root = Path(root).resolve()
+        resolved = sorted((Path(r).resolve() for r in roots), key=lambda p: len(p.parts))
         names = {}
         for file in self.files:
-            if file.path is not None and file.path.is_relative_to(root):
-                names[file.file] = file.path.relative_to(root).as_posix()
+            if file.path is None:
+                continue
+            for root in reversed(resolved):
+                if file.path.is_relative_to(root):
+                    names[file.file] = file.path.relative_to(root).as_posix()
+                    break
+
+        def moved(finding: Finding) -> Finding:
+            related = tuple((names.get(f, f), line) for f, line in finding.related)
+            return replace(finding, file=names.get(finding.file, finding.file), related=related)
+
         files = [replace(f, file=names.get(f.file, f.file)) for f in self.files]
-        findings = [replace(f, file=names.get(f.file, f.file)) for f in self.findings]
-        return replace(self, files=files, findings=findings)
+        return replace(self, files=files, findings=[moved(f) for f in self.findings])
+
+
+@dataclass(frozen=True)
+class GitOrigin:
+    """Where a file of a git baseline comes from: repository, commit, path in it."""
+
+    repository: Path
+    commit: str
+    path: str
 
 
 @dataclass(frozen=True)
@@ -174,8 +221,8 @@ class Source:
 
     ``name`` identifies the file across revisions (relative to the database
     path given), ``display`` is how it is shown, ``path`` is where it is on
-    disk (None for a file read from git). ``data`` is None when the file
-    could not be read, and ``error`` says why.
+    disk (None for a file read from git, which has an ``origin`` instead).
+    ``data`` is None when the file could not be read, and ``error`` says why.
     """
 
     name: str
@@ -183,6 +230,26 @@ class Source:
     path: Path | None
     data: bytes | None
     error: str = ""
+    origin: GitOrigin | None = None
+
+    @property
+    def file_name(self) -> str:
+        """The name without directories: what matches a file across revisions."""
+        return Path(self.name).name
+
+
+class Identified(NamedTuple):
+    """A finding with what matches it against a baseline's findings.
+
+    ``identity`` and ``content`` start with the severity and the code;
+    ``content`` leaves out the names of lenses. ``names`` are the names of
+    the files the finding is about (its own first).
+    """
+
+    finding: Finding
+    identity: Hashable
+    content: Hashable
+    names: tuple[str, ...]
 
 
 def check(
@@ -193,45 +260,54 @@ def check(
 ) -> CheckResult:
     """Check a Lensfun database (directories and/or XML files; None: the bundled one).
 
-    ``baseline`` is an existing directory or file, or else a git revision of
-    the repository holding the paths. ``margin`` (>= 1) is the r_normalized
+    A Lensfun checkout given as a path means its ``data/db``. ``baseline``
+    is an existing directory or file, or else a git revision of the
+    repository holding the paths. ``margin`` (>= 1) is the r_normalized
     below which a fold outside the image is a warning; ``verbose`` adds the
-    notices. Raises :class:`lensaudit.loader.LoadError` (:class:`CheckError`
-    included) when the input or the baseline cannot be read at all.
+    notices about folds. Raises :class:`lensaudit.loader.LoadError`
+    (:class:`CheckError` included) when the input or the baseline cannot be
+    read at all.
     """
     if not margin >= 1 or math.isinf(margin):
         raise CheckError(f"margin {margin} must be a finite number >= 1")
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
+    # resolve() maps a Lensfun checkout to its data/db (database.database_directory),
+    # for the baseline too, which is read at the same paths.
     source = database.resolve(list(paths) if paths else None)
     sources = sources_from_paths(source.paths)
     if all(s.data is None for s in sources):
         raise CheckError(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
-    files, current = analyse(sources, margin, verbose)
-    findings = [finding for finding, _, _ in current]
-    resolved = 0
-    baseline_label = None
-    if baseline is not None:
-        baseline_label = os.fspath(baseline)
-        _, before = analyse(baseline_sources(baseline_label, source.paths), margin, verbose)
-        remaining: dict[Hashable, list[str]] = {}
-        for _, identity, name in before:
-            remaining.setdefault(identity, []).append(name)
-        for index, (finding, identity, _) in enumerate(current):
-            if remaining.get(identity):
-                remaining[identity].pop()
-                findings[index] = replace(finding, known=True)
-        # Entries of a file that no longer parses are not checked: their
-        # findings are not gone, only unseen.
-        broken = {name for finding, _, name in current if finding.code == XML_ERROR}
-        resolved = sum(name not in broken for names in remaining.values() for name in names)
-    return CheckResult(source.label, baseline_label, margin, files, findings, resolved)
+    read = [_read(s) for s in sources]
+    files, current = _analyse(read, margin, verbose)
+    if baseline is None:
+        return CheckResult(source.label, None, margin, files, [c.finding for c in current])
+    label = os.fspath(baseline)
+    before_read = [_read(s) for s in baseline_sources(label, source.paths)]
+    before_read, kept, replaced, incomparable = _readable_baseline(before_read)
+    _, before = _analyse(before_read, margin, verbose)
+    findings, resolved = _compare(current, before + kept, read, incomparable)
+    notices = _baseline_notices(read, label, replaced, incomparable)
+    if notices:
+        order = {f.source.display: index for index, f in enumerate(read)}
+        findings = sorted(notices + findings, key=lambda f: (order.get(f.file, len(read)), f.line))
+    return CheckResult(source.label, label, margin, files, findings, resolved)
 
 
 # ---------------------------------------------------------------------------
 # Sources: files on disk, or blobs of a git revision
+
+
+def _read_regular_file(path: Path) -> bytes:
+    """The bytes of a regular file; OSError for anything else (a FIFO would block)."""
+    info = path.stat()
+    if not stat.S_ISREG(info.st_mode):
+        raise OSError(0, "not a regular file")
+    if info.st_size > loader.MAX_FILE_BYTES:
+        raise OSError(0, f"larger than {loader.MAX_FILE_BYTES >> 20} MiB, not a database file")
+    return path.read_bytes()
 
 
 def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
@@ -257,9 +333,9 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
                     f"{given}: directory holds no *.xml files "
                     f"(a Lensfun database is a directory of XML files)"
                 )
-            targets = [(file, file.name, str(file)) for file in files]
+            targets = [(file, file.name, loader.display_path(file)) for file in files]
         elif given.exists():
-            targets = [(given, str(given), str(given))]
+            targets = [(given, str(given), loader.display_path(given))]
         else:
             raise CheckError(f"{given}: no such file or directory")
         for file, name, display in targets:
@@ -268,7 +344,7 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
                 continue
             seen.add(resolved)
             try:
-                data, error = file.read_bytes(), ""
+                data, error = _read_regular_file(file), ""
             except OSError as os_error:
                 data, error = None, f"cannot read file: {os_error.strerror or os_error}"
             sources.append(Source(name, display, resolved, data, error))
@@ -283,7 +359,12 @@ def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> 
     return sources_from_git(paths, baseline)
 
 
-_GIT_ENVIRONMENT = {"GIT_OPTIONAL_LOCKS": "0", "GIT_TERMINAL_PROMPT": "0", "LC_ALL": "C"}
+_GIT_ENVIRONMENT = {
+    "GIT_OPTIONAL_LOCKS": "0",
+    "GIT_TERMINAL_PROMPT": "0",
+    "GIT_LITERAL_PATHSPECS": "1",
+    "LC_ALL": "C",
+}
 
 
 class _GitFailed(Exception):
@@ -353,7 +434,7 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
         else:
             spec = ["--", relative]
         try:
-            listing = _git(["ls-tree", "-z", commit, *spec], top)
+            listing = _git(["ls-tree", "-z", "--full-tree", commit, *spec], top)
         except _GitFailed as error:
             raise CheckError(f"--baseline {revision}: cannot list {given}: {error}") from None
         blobs = []
@@ -362,36 +443,83 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
             fields = meta.split()
             if len(fields) != 3 or fields[1] != b"blob" or fields[0] not in (b"100644", b"100755"):
                 continue
-            filename = os.fsdecode(path).rsplit("/", 1)[-1]
+            repository_path = os.fsdecode(path)
+            filename = repository_path.rsplit("/", 1)[-1]
             if given.is_dir() and not filename.lower().endswith(".xml"):
                 continue
             name = filename if given.is_dir() else str(given)
-            blobs.append((name, fields[2]))
+            blobs.append((name, fields[2], repository_path))
         blobs.sort()
         try:
-            contents = _cat_file([oid for _, oid in blobs], top)
+            contents = _cat_file([oid for _, oid, _ in blobs], top)
         except _GitFailed as error:
             raise CheckError(f"--baseline {revision}: cannot read {given}: {error}") from None
-        for (name, _), data in zip(blobs, contents, strict=True):
-            sources.append(Source(name, f"{revision}:{name}", None, data))
+        for (name, _, repository_path), data in zip(blobs, contents, strict=True):
+            if data is None:
+                raise CheckError(f"--baseline {revision}: cannot read {name}: object missing")
+            origin = GitOrigin(top, commit, repository_path)
+            sources.append(Source(name, f"{revision}:{name}", None, data, origin=origin))
     return sources
 
 
-def _cat_file(object_ids: list[bytes], repository: Path) -> list[bytes]:
-    """Contents of the given blobs, through one ``git cat-file --batch``."""
-    if not object_ids:
+def _cat_file(objects: list[bytes], repository: Path) -> list[bytes | None]:
+    """Contents of the given objects (ids or ``rev:path``), through one
+    ``git cat-file --batch``; None for an object that does not exist."""
+    if not objects:
         return []
-    output = _git(["cat-file", "--batch"], repository, b"".join(o + b"\n" for o in object_ids))
-    contents, position = [], 0
-    for object_id in object_ids:
+    output = _git(["cat-file", "--batch"], repository, b"".join(o + b"\n" for o in objects))
+    contents: list[bytes | None] = []
+    position = 0
+    for _ in objects:
         end = output.index(b"\n", position)
         header = output[position:end].split()
-        if len(header) != 3 or header[0] != object_id:
-            raise _GitFailed(f"object {object_id.decode()} is missing")
-        size = int(header[2])
-        contents.append(output[end + 1 : end + 1 + size])
-        position = end + 1 + size + 1
+        if len(header) == 3 and header[1] in (b"blob", b"tree", b"commit", b"tag"):
+            size = int(header[2])
+            contents.append(output[end + 1 : end + 1 + size] if header[1] == b"blob" else None)
+            position = end + 1 + size + 1
+        else:  # "<object> missing" or "<object> ambiguous": no content follows
+            contents.append(None)
+            position = end + 1
     return contents
+
+
+def _last_readable(source: Source) -> tuple[Source, str] | None:
+    """The newest version of a git baseline's file that parses, among the last
+    :data:`HISTORY_DEPTH` commits that changed it, and that commit's id."""
+    from lxml import etree
+
+    origin = source.origin
+    if origin is None:
+        return None
+    try:
+        log = _git(
+            [
+                "log",
+                f"--max-count={HISTORY_DEPTH}",
+                "--format=%H",
+                origin.commit,
+                "--",
+                origin.path,
+            ],
+            origin.repository,
+        )
+        commits = log.decode("ascii").split()
+        contents = _cat_file([f"{c}:{origin.path}".encode() for c in commits], origin.repository)
+    except (_GitFailed, UnicodeDecodeError):
+        return None
+    tried: set[bytes] = {source.data or b""}
+    for commit, data in zip(commits, contents, strict=True):
+        if data is None or data in tried:
+            continue
+        tried.add(data)
+        try:
+            root = etree.fromstring(data, loader.make_parser())
+        except etree.XMLSyntaxError:
+            continue
+        if etree.QName(root).localname != loader.DATABASE_ROOT:
+            continue
+        return replace(source, data=data, origin=replace(origin, commit=commit)), commit
+    return None
 
 
 # ---------------------------------------------------------------------------
@@ -404,6 +532,7 @@ class _Lens:
     maker: str
     model: str
     crop_factor: float | str | None  # the number, the text if not a number, None if absent
+    element: object = field(default=None, compare=False, repr=False)
 
 
 @dataclass
@@ -455,44 +584,30 @@ def _read(source: Source) -> _File:
     """The records of one file, its file-level finding and its lens structure."""
     from lxml import etree
 
+    display = source.display
     if source.data is None:
-        problem = Finding(
-            SEVERITY_ERROR, UNREADABLE, source.display, 0, 0, f"{source.display}: {source.error}"
-        )
+        problem = Finding(SEVERITY_ERROR, UNREADABLE, display, 0, 0, f"{display}: {source.error}")
         return _File(source, [], problem, source.error)
     data = source.data
-    entries, load_error = loader.read_bytes(data, source.display)
-    if load_error:
-        entries = entries[1:]  # the file-level record; the finding replaces it
     try:
         root = etree.fromstring(data, loader.make_parser())
-        position = None
     except etree.XMLSyntaxError as error:
-        root = None
-        position = _syntax_error(data, error)
-    if position is None and load_error:
-        match = re.search(r"line (\d+), column (\d+): (.*)", load_error, re.DOTALL)
-        position = (
-            (int(match.group(1)), int(match.group(2)), match.group(3))
-            if match
-            else (0, 0, load_error)
-        )
-    if position is not None:
-        line, column, text = position
-        if not load_error:
-            # The whole file is judged, also where the loader's shortcut saw no error.
-            note = f"file is not well-formed XML (line {line}, column {column}: {text})"
-            entries = [
-                replace(
-                    e,
-                    status=loader.STATUS_XML_ERROR,
-                    message="; ".join(filter(None, (e.message, note))),
-                )
-                for e in entries
-            ]
+        # The loader's records: one for the file, then what recovery mode salvages.
+        entries, load_error = loader.read_bytes(data, display)
+        if load_error:
+            entries = entries[1:]
+        line, column, text = _syntax_error(data, error)
         message = _clip(f"XML is not well-formed at line {line}, column {column}: {text}")
-        problem = Finding(SEVERITY_ERROR, XML_ERROR, source.display, line, column, message)
+        problem = Finding(SEVERITY_ERROR, XML_ERROR, display, line, column, message)
         return _File(source, entries, problem, text)
+    if b"xmlns" in data:
+        loader._use_local_names(root)  # as the loader reads it: liblensfun ignores namespaces
+    if root.tag != loader.DATABASE_ROOT:
+        entries, load_error = loader.read_bytes(data, display)
+        line = entries[0].line if entries else 1
+        problem = Finding(SEVERITY_ERROR, NOT_A_DATABASE, display, line, 0, _clip(load_error))
+        return _File(source, entries[1:], problem, load_error)
+    entries = list(loader.entries_from_tree(root, display))
     lenses, lens_of_element = _lens_structure(root)
     elements = list(root.iter("distortion"))
     lens_of_entry = None
@@ -525,17 +640,35 @@ def _lens_structure(root) -> tuple[tuple[_Lens, ...], dict]:
                 crop = loader.parse_number(crop_text)
             except ValueError:
                 pass
+            if crop != crop:
+                crop = crop_text  # NaN would never equal itself as a key
         lenses.append(
             _Lens(
                 element.sourceline or 0,
                 _untranslated(element, "maker") or "",
                 _untranslated(element, "model") or "",
                 crop,
+                element,
             )
         )
         for distortion in element.iter("distortion"):
             lens_of_element[distortion] = index  # the innermost lens wins: iterated last
     return tuple(lenses), lens_of_element
+
+
+def _element_content(element, skip_names: bool = False) -> tuple:
+    """An element's tag, attributes, text (white space collapsed) and child
+    elements, recursively; comments left out. ``skip_names`` leaves out the
+    untranslated ``<maker>`` and ``<model>`` children."""
+    children = []
+    for child in element:
+        if not isinstance(child.tag, str):
+            continue  # a comment or processing instruction
+        if skip_names and child.tag in ("maker", "model") and child.get("lang") is None:
+            continue
+        children.append(_element_content(child))
+    text = " ".join((element.text or "").split())
+    return (element.tag, tuple(sorted(element.attrib.items())), text, tuple(children))
 
 
 # ---------------------------------------------------------------------------
@@ -544,31 +677,29 @@ def _lens_structure(root) -> tuple[tuple[_Lens, ...], dict]:
 
 def analyse(
     sources: Sequence[Source], margin: float = DEFAULT_MARGIN, verbose: bool = False
-) -> tuple[list[CheckedFile], list[tuple[Finding, Hashable, str]]]:
-    """Files and findings of one database.
+) -> tuple[list[CheckedFile], list[Identified]]:
+    """Files and findings of one database, each finding with what matches it
+    against a baseline's (see :class:`Identified`)."""
+    return _analyse([_read(source) for source in sources], margin, verbose)
 
-    Each finding comes with the identity that matches it against a
-    baseline's, and the name of its file.
-    """
-    read = [_read(source) for source in sources]
+
+def _analyse(
+    read: Sequence[_File], margin: float, verbose: bool
+) -> tuple[list[CheckedFile], list[Identified]]:
     files = [
         CheckedFile(
             f.source.display, f.source.path, len(f.entries), f.problem.message if f.problem else ""
         )
         for f in read
     ]
-    ordered: list[tuple[tuple[int, int, int], Finding, Hashable]] = []
+    ordered: list[tuple[tuple[int, int, int], Identified]] = []
 
-    def add(file_index: int, finding: Finding, identity: Hashable) -> None:
-        ordered.append(((file_index, finding.line, len(ordered)), finding, identity))
+    def add(file_index: int, item: Identified) -> None:
+        ordered.append(((file_index, item.finding.line, len(ordered)), item))
 
     for index, file in enumerate(read):
         if file.problem is not None:
-            add(
-                index,
-                file.problem,
-                (file.problem.code, Path(file.source.name).name, file.problem_text),
-            )
+            add(index, _file_identified(file))
 
     entries = [
         (index, entry)
@@ -578,30 +709,36 @@ def analyse(
     ]
     metrics = _metrics([entry for _, entry in entries])
     for position, (index, entry) in enumerate(entries):
-        key = entry_key(entry)
-        identity = (key, _fingerprint(entry))
         if entry.status != loader.STATUS_OK:
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
-            add(index, _entry_finding(SEVERITY_ERROR, code, entry, entry.message), (code, identity))
-            continue
-        finding = _fold_finding(entry, metrics[position], margin, verbose)
-        if finding is not None:
-            add(index, finding, (finding.code, identity))
+            finding = _entry_finding(SEVERITY_ERROR, code, entry, entry.message)
+        else:
+            finding = _fold_finding(entry, metrics[position], margin, verbose)
+            if finding is None:
+                continue
+        content = (finding.severity, finding.code, _entry_content(entry))
+        identity = (*content, _lens_identity(entry.maker, entry.lens))
+        add(index, Identified(finding, identity, content, (read[index].source.file_name,)))
 
-    for index, finding, identity in _duplicate_focals(read):
-        add(index, finding, identity)
-    for index, finding, identity in _duplicate_lenses(read):
-        add(index, finding, identity)
-    ordered.sort(key=lambda item: item[0])
-    return files, [
-        (finding, identity, Path(read[key[0]].source.name).name)
-        for key, finding, identity in ordered
-    ]
+    for index, item in _duplicate_focals(read):
+        add(index, item)
+    for index, item in _duplicate_lenses(read):
+        add(index, item)
+    ordered.sort(key=lambda pair: pair[0])
+    return files, [item for _, item in ordered]
+
+
+def _file_identified(file: _File) -> Identified:
+    """A file-level finding: the file's name and the problem, without its position."""
+    problem = file.problem
+    assert problem is not None
+    identity = (problem.severity, problem.code, file.source.file_name, file.problem_text)
+    return Identified(problem, identity, identity, (file.source.file_name,))
 
 
 def entry_key(entry: loader.DistortionEntry) -> tuple:
-    """(maker, lens, crop factor, model, focal): how an entry is matched across
-    revisions. NaN values are None."""
+    """(maker, lens, crop factor, model, focal): how an entry is named in
+    output. NaN values are None."""
     return (entry.maker, entry.lens, _number(entry.crop_factor), entry.model, _number(entry.focal))
 
 
@@ -609,15 +746,32 @@ def _number(value: float) -> float | None:
     return None if value != value else value
 
 
-def _fingerprint(entry: loader.DistortionEntry) -> tuple:
-    """What makes two entries with the same key the same entry."""
+def _identity_name(text: str) -> str:
+    """A maker or model name as identities compare it: without case or any
+    white space, so that "RF200-800mm" and "RF 200-800mm" are one lens."""
+    return "".join(text.split()).casefold()
+
+
+def _lens_identity(maker: str, model: str) -> tuple[str, str]:
+    return _identity_name(maker), _identity_name(model)
+
+
+_LINE_NUMBER = re.compile(r"\bline \d+")
+
+
+def _entry_content(entry: loader.DistortionEntry) -> tuple:
+    """An entry's own values, without its lens's name, file or line."""
+    message = "" if entry.status == loader.STATUS_OK else _LINE_NUMBER.sub("line", entry.message)
     return (
+        entry.model,
         entry.type,
         entry.status,
+        message,
         *(
             _number(getattr(entry, name))
-            for name in ("aspect_ratio", "real_focal", "a", "b", "c", "k1", "k2")
+            for name in ("focal", "crop_factor", "aspect_ratio", "real_focal")
         ),
+        *(_number(getattr(entry, name)) for name in ("a", "b", "c", "k1", "k2")),
     )
 
 
@@ -761,16 +915,17 @@ def _fold_finding(
     return None
 
 
-def _duplicate_focals(read: list[_File]) -> Iterable[tuple[int, Finding, Hashable]]:
+def _duplicate_focals(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]:
     """A second ``<distortion>`` for a focal length of the same calibration.
 
     A calibration is the entries of one ``<lens>`` with the same crop factor
-    and aspect ratio (those a ``<calibration>`` element may override).
+    and aspect ratio (those a ``<calibration>`` element may override). The
+    finding is an error, or a warning when the two entries are identical.
     """
     for index, file in enumerate(read):
         if file.problem is not None or file.lens_of_entry is None:
             continue
-        first_line: dict[tuple, int] = {}
+        first: dict[tuple, tuple[int, tuple]] = {}
         for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
             if lens is None or entry.focal != entry.focal:
                 continue
@@ -780,34 +935,64 @@ def _duplicate_focals(read: list[_File]) -> Iterable[tuple[int, Finding, Hashabl
                 _number(entry.aspect_ratio),
                 entry.focal,
             )
-            first = first_line.get(calibration)
-            if first is None:
-                first_line[calibration] = entry.line
+            content = _entry_content(entry)
+            if calibration not in first:
+                first[calibration] = (entry.line, content)
                 continue
-            text = (
-                f"a second distortion entry for {entry.focal:g} mm in the same "
-                f"calibration (the first is at line {first}); liblensfun keeps "
-                f"only one of them"
+            first_line, first_content = first[calibration]
+            if content == first_content:
+                severity = SEVERITY_WARNING
+                text = (
+                    f"a second distortion entry for {entry.focal:g} mm in the same "
+                    f"calibration, identical to the one at line {first_line}: one of "
+                    f"them can go"
+                )
+            else:
+                severity = SEVERITY_ERROR
+                text = (
+                    f"a second distortion entry for {entry.focal:g} mm in the same "
+                    f"calibration (the first is at line {first_line}); liblensfun keeps "
+                    f"only one of them"
+                )
+            finding = replace(
+                _entry_finding(severity, DUPLICATE_FOCAL, entry, text),
+                related=((file.source.display, first_line),),
             )
-            finding = _entry_finding(SEVERITY_ERROR, DUPLICATE_FOCAL, entry, text)
-            yield index, finding, (DUPLICATE_FOCAL, (entry_key(entry), _fingerprint(entry)))
+            # Either entry may come first after a reordering: the pair is the identity.
+            pair = tuple(sorted((content, first_content), key=repr))
+            identity = (severity, DUPLICATE_FOCAL, _lens_identity(entry.maker, entry.lens), pair)
+            content_key = (severity, DUPLICATE_FOCAL, content)
+            yield index, Identified(finding, identity, content_key, (file.source.file_name,))
 
 
 def _normalized_name(text: str) -> str:
     return " ".join(text.split()).casefold()
 
 
-def _duplicate_lenses(read: list[_File]) -> Iterable[tuple[int, Finding, Hashable]]:
-    """A ``<lens>`` whose maker, model and crop factor an earlier one has, in any file."""
-    first: dict[tuple, tuple[str, int]] = {}
+def _duplicate_lenses(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]:
+    """A ``<lens>`` whose maker, model and crop factor an earlier one has, in any file.
+
+    An error, or a warning when the two lenses are identical but for the
+    case and spacing of their names.
+    """
+    first: dict[tuple, tuple[_File, _Lens]] = {}
+    contents: dict[int, tuple] = {}  # lens content by id(lens), computed for duplicates only
+
+    def content_of(lens: _Lens) -> tuple:
+        if id(lens) not in contents:
+            contents[id(lens)] = _element_content(lens.element, skip_names=True)
+        return contents[id(lens)]
+
     for index, file in enumerate(read):
         if file.problem is not None:
             continue
         for lens in file.lenses:
             key = (_normalized_name(lens.maker), _normalized_name(lens.model), lens.crop_factor)
-            where = first.setdefault(key, (file.source.display, lens.line))
-            if where == (file.source.display, lens.line):
+            earlier_file, earlier = first.setdefault(key, (file, lens))
+            if earlier is lens:
                 continue
+            content = content_of(lens)
+            where = f"{earlier_file.source.display}:{earlier.line}"
             crop = (
                 f"crop factor {lens.crop_factor:g}"
                 if isinstance(lens.crop_factor, float)
@@ -816,17 +1001,136 @@ def _duplicate_lenses(read: list[_File]) -> Iterable[tuple[int, Finding, Hashabl
                 else f"crop factor {_clip(lens.crop_factor, 20)!r}"
             )
             name = _lens_name(lens.maker, lens.model)
-            text = (
-                f"lens {name} ({crop}) is already defined at {where[0]}:{where[1]}; "
-                f"liblensfun keeps only one of them"
-            )
+            if content == content_of(earlier):
+                severity = SEVERITY_WARNING
+                text = f"lens {name} ({crop}) is defined identically at {where}: one can go"
+            else:
+                severity = SEVERITY_ERROR
+                text = (
+                    f"lens {name} ({crop}) is already defined at {where}; "
+                    f"liblensfun keeps only one of them"
+                )
             finding = Finding(
-                SEVERITY_ERROR,
+                severity,
                 DUPLICATE_LENS,
                 file.source.display,
                 lens.line,
                 0,
                 _clip(text),
                 _clip_key((lens.maker, lens.model, lens.crop_factor)),
+                related=((earlier_file.source.display, earlier.line),),
             )
-            yield index, finding, (DUPLICATE_LENS, key)
+            pair = tuple(sorted((content, content_of(earlier)), key=repr))
+            identity = (severity, DUPLICATE_LENS, key, pair)
+            content_key = (severity, DUPLICATE_LENS, lens.crop_factor, content)
+            names = (file.source.file_name, earlier_file.source.file_name)
+            yield index, Identified(finding, identity, content_key, names)
+
+
+# ---------------------------------------------------------------------------
+# Comparing with the baseline
+
+
+def _readable_baseline(
+    read: list[_File],
+) -> tuple[list[_File], list[Identified], list[tuple[str, str]], set[str]]:
+    """The baseline's files with each one that cannot be parsed replaced by its
+    last readable version from git.
+
+    Also returns the file-level findings of the replaced files (the baseline
+    had them, whatever the older version holds), the (name, commit) of each
+    replacement, and the names of files left without a readable version.
+    """
+    read = list(read)
+    kept: list[Identified] = []
+    replaced: list[tuple[str, str]] = []
+    incomparable: set[str] = set()
+    for index, file in enumerate(read):
+        if file.problem is None:
+            continue
+        older = _last_readable(file.source)
+        if older is None:
+            incomparable.add(file.source.file_name)
+            continue
+        kept.append(_file_identified(file))
+        read[index] = _read(older[0])
+        replaced.append((file.source.file_name, older[1]))
+    return read, kept, replaced, incomparable
+
+
+def _compare(
+    current: list[Identified],
+    before: list[Identified],
+    read: Sequence[_File],
+    incomparable: set[str],
+) -> tuple[list[Finding], int]:
+    """The current findings with those the baseline has marked known, and the
+    number of the baseline's findings that are gone (resolved).
+
+    A finding is known when an unmatched baseline finding has its identity;
+    those left may still match one by content (a renamed lens). Findings in
+    a file whose baseline could not be read are known too, but for its own
+    file-level finding.
+    """
+    by_identity: dict[Hashable, list[int]] = {}
+    by_content: dict[Hashable, list[int]] = {}
+    for position, item in enumerate(before):
+        by_identity.setdefault(item.identity, []).append(position)
+        by_content.setdefault(item.content, []).append(position)
+    used = [False] * len(before)
+
+    def take(pool: dict[Hashable, list[int]], key: Hashable) -> bool:
+        candidates = pool.get(key)
+        while candidates:
+            position = candidates.pop(0)
+            if not used[position]:
+                used[position] = True
+                return True
+        return False
+
+    known = [take(by_identity, item.identity) for item in current]
+    for position, item in enumerate(current):
+        if not known[position]:
+            known[position] = take(by_content, item.content)
+    for position, item in enumerate(current):
+        if item.finding.code not in FILE_CODES and incomparable.intersection(item.names):
+            known[position] = True
+    findings = [
+        replace(item.finding, known=True) if is_known else item.finding
+        for item, is_known in zip(current, known, strict=True)
+    ]
+    # Entries of a file that no longer parses are not checked: their findings
+    # are not gone, only unseen.
+    unseen = {f.source.file_name for f in read if f.problem is not None}
+    resolved = sum(
+        not used[position] and not unseen.intersection(item.names)
+        for position, item in enumerate(before)
+    )
+    return findings, resolved
+
+
+def _baseline_notices(
+    read: Sequence[_File], label: str, replaced: list[tuple[str, str]], incomparable: set[str]
+) -> list[Finding]:
+    """A notice for each readable file whose baseline version could not be parsed."""
+    readable = {f.source.file_name: f.source.display for f in read if f.problem is None}
+    notices = []
+    for name, commit in replaced:
+        if name in readable:
+            text = (
+                f"the baseline's version ({label}) could not be parsed; compared with the "
+                f"last version that can, of commit {commit[:12]}"
+            )
+            notices.append(
+                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
+            )
+    for name in sorted(incomparable):
+        if name in readable:
+            text = (
+                f"the baseline's version ({label}) could not be parsed, and no earlier "
+                f"version that can was found: the findings in this file are not counted as new"
+            )
+            notices.append(
+                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
+            )
+    return [replace(n, message=_clip(n.message)) for n in notices]

@@ -3,7 +3,8 @@
 ``summary.failed`` is the verdict; ``files[].entries`` counts each file's
 ``<distortion>`` elements; ``findings[].entry_key`` is [maker, lens, crop
 factor, model, focal] for an entry, [maker, lens, crop factor] for a lens
-and [] for a file.
+and [] for a file; ``findings[].related`` lists the ``{"file", "line"}`` of
+the entry or lens that a duplicate repeats.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def document(result: CheckResult) -> dict[str, Any]:
                 "entry_key": [_value(v) for v in f.entry_key],
                 "known": f.known,
                 "fails": f.fails,
+                "related": [{"file": file, "line": line} for file, line in f.related],
             }
             for f in result.findings
         ],

@@ -4,7 +4,9 @@ One ``<testsuite>`` per file; in it one ``<testcase>`` per finding, which
 holds a ``<failure>`` when the finding fails the check, ``<skipped>`` when
 it is known from the baseline, and passes (with the text in
 ``<system-out>``) for warnings and notices. A file without findings has one
-passing test case, so that every file checked is listed.
+passing test case, so that every file checked is listed. Paths are written
+as the result holds them; ``lensaudit check`` makes them relative to the
+root of the git repository that holds the database, as CI systems expect.
 """
 
 from __future__ import annotations
