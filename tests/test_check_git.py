@@ -237,3 +237,111 @@ def test_pre_commit_hook_command_fails_a_staged_folding_entry(repository, runner
     insert_after_first_distortion(repository.db / CHANGED_FILE, FOLDING)
     git(repository.root, "add", "data")
     assert runner.invoke(main, ["check", *arguments]).exit_code == 1
+
+
+# -- a baseline whose file cannot be parsed -------------------------------------------
+
+
+def break_file(path: Path) -> None:
+    """Delete the first ">" of line 6, as an unfinished edit would."""
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    lines[5] = lines[5].replace(">", "", 1)
+    path.write_text("".join(lines), encoding="utf-8")
+
+
+@pytest.fixture
+def repaired(repository) -> tuple[Repository, str, list[int]]:
+    """A fold committed, then its file broken, then repaired (uncommitted).
+
+    Returns the repository, the commit with the fold, and the fold's line.
+    """
+    path = repository.db / CHANGED_FILE
+    fold_lines = insert_after_first_distortion(path, FOLDING)
+    git(repository.root, "commit", "-q", "-am", "a fold")
+    with_fold = git(repository.root, "rev-parse", "HEAD")
+    good = path.read_bytes()
+    break_file(path)
+    git(repository.root, "commit", "-q", "-am", "break the file")
+    path.write_bytes(good)
+    return repository, with_fold, fold_lines
+
+
+def test_repairing_a_broken_file_keeps_its_old_findings_known(repaired):
+    repository, with_fold, [fold_line] = repaired
+    result = check(repository.db, baseline="HEAD")
+    assert not result.failed
+    assert [(f.code, f.line, f.known) for f in result.findings if f.severity == "error"] == [
+        ("fold-in-image", fold_line, True)
+    ]
+
+
+def test_the_repaired_file_gets_a_notice_naming_the_version_compared_with(repaired):
+    repository, with_fold, _ = repaired
+    [notice] = [f for f in check(repository.db, baseline="HEAD").findings if f.severity == "notice"]
+    assert notice.code == "baseline-unreadable"
+    assert Path(notice.file).name == CHANGED_FILE
+    assert f"of commit {with_fold[:12]}" in notice.message
+
+
+def test_a_fold_added_while_repairing_a_file_is_new(repaired):
+    repository, _, _ = repaired
+    [new_line] = insert_after_first_distortion(repository.db / CHANGED_FILE, MALFORMED)
+    result = check(repository.db, baseline="HEAD")
+    assert [(f.code, f.line) for f in result.findings if f.fails] == [("bad-value", new_line)]
+
+
+def test_without_a_readable_version_the_findings_of_the_file_are_not_new(repaired, monkeypatch):
+    from lensaudit import check as checking
+
+    repository, _, [fold_line] = repaired
+    monkeypatch.setattr(checking, "HISTORY_DEPTH", 1)  # only the broken version is searched
+    result = check(repository.db, baseline="HEAD")
+    assert not result.failed
+    assert [(f.code, f.line, f.known) for f in result.findings if f.severity == "error"] == [
+        ("fold-in-image", fold_line, True)
+    ]
+    [notice] = [f for f in result.findings if f.severity == "notice"]
+    assert "not counted as new" in notice.message
+
+
+def test_a_broken_file_unchanged_since_the_baseline_is_known(repaired):
+    repository, _, _ = repaired
+    break_file(repository.db / CHANGED_FILE)  # the same breakage as the baseline's
+    result = check(repository.db, baseline="HEAD")
+    assert [(f.code, f.known) for f in result.findings if f.severity == "error"] == [
+        ("xml-error", True)
+    ]
+
+
+# -- paths as CI systems expect them -------------------------------------------------
+
+
+def test_github_workspace_does_not_override_the_repository_holding_path(
+    repository, runner, monkeypatch
+):
+    fold_line, _ = repository.commit_change()
+    monkeypatch.setenv("GITHUB_WORKSPACE", str(repository.root.parent))
+    result = runner.invoke(
+        main, ["check", str(repository.db), "--baseline", repository.baseline, "-f", "github"]
+    )
+    first = result.output.splitlines()[0]
+    assert first.startswith(f"::error file=data/db/{CHANGED_FILE},line={fold_line},")
+
+
+def test_junit_file_paths_are_relative_to_the_repository_root(
+    repository, runner, monkeypatch, tmp_path
+):
+    import xml.etree.ElementTree as StdlibET
+
+    repository.commit_change()
+    monkeypatch.delenv("GITHUB_WORKSPACE", raising=False)
+    monkeypatch.chdir(tmp_path)  # outside the repository: paths given are absolute
+    result = runner.invoke(
+        main, ["check", str(repository.db), "--baseline", repository.baseline, "-f", "junit"]
+    )
+    root = StdlibET.fromstring(result.output)
+    failing = [case for case in root.iter("testcase") if case.find("failure") is not None]
+    assert {case.get("file") for case in failing} == {f"data/db/{CHANGED_FILE}"}
+    assert {suite.get("name") for suite in root.iter("testsuite")} == {
+        f"data/db/{name}" for name in BASELINE_FILES
+    }

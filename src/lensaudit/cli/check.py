@@ -67,15 +67,21 @@ def check(
       fold-in-image        the model folds back inside its own image:
                            D(r_max) < image corner hypot(aspect, 1)
       xml-error            the file is not well-formed XML (line, column)
-      missing-attribute, bad-value, unknown-model, no-lens,
-      duplicate-lens, duplicate-focal, unreadable, r-max-not-computable
-    Warnings: fold-near-image (D(r_max) below MARGIN times the corner).
-    Notices (--verbose): fold-outside-image (any other finite r_max).
+      not-a-database, missing-attribute, bad-value, unknown-model,
+      no-lens, duplicate-lens, duplicate-focal, unreadable,
+      r-max-not-computable
+    Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
+      duplicate-lens and duplicate-focal when the two are identical.
+    Notices: baseline-unreadable (how a baseline file that cannot be parsed
+      was replaced).
+    Notices with --verbose: fold-outside-image (any other finite r_max).
 
     With --baseline, findings the baseline already has are reported as known
-    and do not fail: entries are matched by (maker, lens, crop factor, model,
-    focal), so only new or changed entries fail the check. A git revision is
-    read with git ls-tree and git cat-file; the work tree is not touched.
+    and do not fail, so only new or changed entries fail the check. Entries
+    are matched by content (lens name ignoring case and white space, and the
+    entry's own values), never by line. A git revision is read with git
+    ls-tree and git cat-file; the work tree is not touched. A baseline file
+    that cannot be parsed is replaced by its last version in git that can.
 
     \b
     Exit status:
@@ -94,28 +100,44 @@ def check(
         result = run_check(list(paths) or None, baseline=baseline, margin=margin, verbose=verbose)
     except (CheckError, LoadError) as error:
         fail(str(error))
-    if output_format == "github":
-        result = result.relative_to(_repository_root(paths))
+    if output_format in ("github", "junit"):
+        result = result.relative_to(*_repository_roots(paths))
     with output_stream(output) as stream:
         writer(output_format)(result, stream)
     if result.failed:
         raise SystemExit(EXIT_FINDINGS)
 
 
-def _repository_root(paths: tuple[Path, ...]) -> Path:
-    """Where GitHub's paths start: GITHUB_WORKSPACE, else the top level of the
-    git repository holding the first path (or the current directory)."""
-    workspace = os.environ.get("GITHUB_WORKSPACE")
-    if workspace:
-        return Path(workspace)
-    start = paths[0] if paths else Path.cwd()
-    directory = start if start.is_dir() else start.parent
+def _repository_roots(paths: tuple[Path, ...]) -> list[Path]:
+    """Where CI systems start their paths: the top level of the git repository
+    holding each PATH, found from PATH itself.
+
+    For a PATH in no repository, GITHUB_WORKSPACE when set (GitHub's checkout),
+    else the current directory. GITHUB_WORKSPACE never overrides the
+    repository that holds PATH: it may be a parent of it, or another
+    checkout altogether.
+    """
+    roots = []
+    for start in paths or (Path.cwd(),):
+        directory = start if start.is_dir() else start.parent
+        top = _git_top_level(directory)
+        if top is None:
+            top = Path(os.environ.get("GITHUB_WORKSPACE") or Path.cwd())
+        if top not in roots:
+            roots.append(top)
+    return roots
+
+
+def _git_top_level(directory: Path) -> Path | None:
     try:
         completed = subprocess.run(
-            ["git", "rev-parse", "--show-toplevel"], cwd=directory, capture_output=True, check=False
+            ["git", "-C", os.fspath(directory), "rev-parse", "--show-toplevel"],
+            capture_output=True,
+            check=False,
+            env={**os.environ, "GIT_OPTIONAL_LOCKS": "0"},
         )
     except OSError:
-        return Path.cwd()
+        return None
     if completed.returncode == 0 and completed.stdout.strip():
         return Path(os.fsdecode(completed.stdout.strip()))
-    return Path.cwd()
+    return None
