@@ -1,0 +1,125 @@
+"""Refitted models as liblensfun itself applies them, from the patched database files.
+
+liblensfun's undistortion map sends each output (undistorted) pixel to the
+source (distorted) pixel it is read from; along the image diagonal its
+distance from the centre is D(r) in pixels. After ``fix`` has written a
+copy of the bundled database, that map must rise monotonically all the way
+to the corner, and differ from the original database's map by no more than
+the change ``fix`` reported (converted from its 6000x4000 frame to the image
+used here), while reaching that change somewhere on the diagonal.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from lensaudit import fix
+from lensaudit.xmlpatch import write
+
+lensfunpy = pytest.importorskip("lensfunpy")
+
+SHORT_SIDE = 4000  # pixels, about; adjusted so that the aspect ratio is exact
+SAMPLES = 600  # points along the half diagonal
+#: liblensfun computes in single precision: about 1e-7 of 4000 px per step.
+NOISE_PX = 0.01
+
+
+@pytest.fixture(scope="module")
+def databases(bundled_db, tmp_path_factory):
+    """(original database, patched database, results): every fold refitted and written."""
+    original = tmp_path_factory.mktemp("original") / "db"
+    shutil.copytree(bundled_db, original)
+    patched = tmp_path_factory.mktemp("patched") / "db"
+    shutil.copytree(bundled_db, patched)
+    results, patches = fix.fix(str(patched), tolerance=math.inf)
+    for patch in patches:
+        write(patch)
+
+    def open_database(directory):
+        files = [str(p) for p in sorted(directory.glob("*.xml"))]
+        database = lensfunpy.Database(paths=files, load_common=False, load_bundled=False)
+        return {
+            (lens.maker.strip(), lens.model.strip(), float(np.float32(lens.crop_factor))): lens
+            for lens in reversed(database.lenses)  # the first of equal keys wins
+        }
+
+    return open_database(original), open_database(patched), results
+
+
+def frame(aspect_ratio: float) -> tuple[int, int]:
+    """Width and height whose (W - 1) / (H - 1) is exactly the aspect ratio.
+
+    liblensfun measures an image between the centres of its border pixels.
+    """
+    ratio = Fraction(aspect_ratio).limit_denominator(100)
+    short = ratio.denominator * round(SHORT_SIDE / ratio.denominator)
+    return int(short * ratio) + 1, short + 1
+
+
+def diagonal(lens, entry) -> tuple[np.ndarray, float]:
+    """Where along the half diagonal its source pixels are read, and pixels per Hugin unit.
+
+    Positions are signed distances from the centre along the diagonal: D(r),
+    which a model that folds takes back through the centre.
+    """
+    width, height = frame(entry.aspect_ratio)
+    modifier = lensfunpy.Modifier(lens, entry.crop_factor, width, height)
+    modifier.initialize(
+        entry.focal, lens.max_aperture or 2.8, scale=1.0, flags=lensfunpy.ModifyFlags.DISTORTION
+    )
+    centre_x, centre_y = (width - 1) / 2, (height - 1) / 2
+    length = math.hypot(centre_x, centre_y)
+    positions = []
+    for t in np.linspace(0.0, 1.0, SAMPLES):
+        x, y = centre_x * (1 + t), centre_y * (1 + t)
+        source = modifier.apply_geometry_distortion(x, y, 1, 1)[0, 0].astype(np.float64)
+        along = (source[0] - centre_x) * centre_x + (source[1] - centre_y) * centre_y
+        positions.append(along / length)
+    return np.array(positions), (height - 1) / 2
+
+
+def lens_of(lenses, entry):
+    lens = lenses.get((entry.maker, entry.lens, float(np.float32(entry.crop_factor))))
+    assert lens is not None, f"{entry.file}:{entry.line}: lens not found by liblensfun"
+    return lens
+
+
+def test_every_fold_of_the_bundled_database_was_refitted(databases):
+    _, _, results = databases
+    assert len(results) == 7
+    assert all(r.status == fix.STATUS_FIXED for r in results)
+
+
+def test_liblensfun_undistorts_monotonically_to_the_corner_after_the_fix(databases):
+    _, patched, results = databases
+    for result in results:
+        radii, _ = diagonal(lens_of(patched, result.entry), result.entry)
+        assert np.all(np.diff(radii) > 0), result.where
+
+
+def test_liblensfun_folds_before_the_corner_without_the_fix(databases):
+    original, _, results = databases
+    folded = 0
+    for result in results:
+        radii, unit = diagonal(lens_of(original, result.entry), result.entry)
+        # The old model turns back before its source reaches the corner.
+        folded += bool(radii.max() < result.goal.r_corner * unit)
+    assert folded == len(results)
+
+
+def test_liblensfun_moves_pixels_by_no_more_than_the_reported_change(databases):
+    original, patched, results = databases
+    for result in results:
+        entry = result.entry
+        old, unit = diagonal(lens_of(original, entry), entry)
+        new, _ = diagonal(lens_of(patched, entry), entry)
+        reported = result.max_change_px * unit / fix.PIXELS_PER_UNIT
+        difference = np.abs(new - old)
+        assert difference.max() <= reported + NOISE_PX, result.where
+        # ... and reaches it: the largest change lies on the diagonal, sampled finely.
+        assert difference.max() >= 0.99 * reported - NOISE_PX, result.where
