@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from lxml import etree
 
+from conftest import lens_xml
 from lensaudit.pipeline import run
 from lensaudit.report import curves, figures, select, warp
 
@@ -156,8 +157,11 @@ def test_sketch_curve_is_d_of_r_without_clamping(audit):
         else:
             expected = curve.r * (1 + entry.k1 * curve.r**2 + entry.k2 * curve.r**4)
         assert np.allclose(curve.d, expected, rtol=1e-12, atol=1e-12)
-        top = 1.15 * max(curve.r_corner, float(expected.max()))
-        assert expected.min() >= -curves.SKETCH_FLOOR * top * (1 + 1e-9), entry.lens
+        # The range: 1.15 times the larger of the corner and D(r_max), down to
+        # half of that below zero.
+        top = 1.15 * max(curve.r_corner, curve.d_max)
+        assert expected.max() <= top * (1 + 1e-9), entry.lens
+        assert expected.min() >= -0.5 * top * (1 + 1e-9), entry.lens
         assert curve.r[-1] > curve.r_max
 
 
@@ -227,3 +231,20 @@ def test_sketch_of_a_model_that_never_folds_has_no_r_max_mark():
     root = etree.fromstring(curves.sketch_svg(curve))
     assert not root.findall("circle")
     assert not [t for t in root.iter("text") if t.text.startswith("r_max")]
+
+
+def test_sketch_of_a_model_that_rises_again_ends_at_its_top(write_xml):
+    # poly3 k1 = 2: D(r) = r (2 r^2 - 1) falls from the centre (r_max = 0), then
+    # rises for good; the sketch's top is 1.15 times the corner hypot(1.5, 1).
+    audit = run(write_xml(lens_xml('<distortion model="poly3" focal="10" k1="2"/>')))
+    (index,) = audit.summary.folding
+    m = audit.metrics
+    curve = curves.sketch_sample(
+        audit.entries[index], float(m.r_max[index]), float(m.d_max[index]), float(m.r_corner[index])
+    )
+    top = 1.15 * math.hypot(1.5, 1.0)
+    roots = np.roots([2.0, 0.0, -1.0, -top])
+    crossing = max(r.real for r in roots if abs(r.imag) < 1e-12)
+    assert curve.r[-1] == pytest.approx(crossing, rel=1e-9)
+    root, *_ = svg_points(curves.sketch_svg(curve))
+    assert root.find("polyline") is not None and float(m.r_max[index]) == 0.0

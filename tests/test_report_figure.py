@@ -5,7 +5,9 @@ from __future__ import annotations
 import bisect
 import csv
 import decimal
+import io
 import math
+import warnings
 from decimal import Decimal
 
 import numpy as np
@@ -84,7 +86,7 @@ def test_bins_are_ten_per_decade_and_one_is_an_edge(bundled_report):
 def test_edges_are_powers_of_ten_rounded_to_six_digits_everywhere():
     # Rounding the platform's pow must land on the decimal of the exact power:
     # over the whole range of binary64 the edges are the same on every machine.
-    for k in range(-3070, 3081, 7):
+    for k in range(-3070, 3081):
         assert histogram.edge(k) == decimal_edge(k), k
     assert histogram.edge(0) == 1.0 and histogram.edge(10) == 10.0
 
@@ -228,3 +230,18 @@ def test_every_value_falls_in_the_bin_its_written_edges_give(values):
     edges = [float(rows[0][0])] + [float(r[1]) for r in rows]
     assert [r[2] for r in rows] == count_by_hand(values, edges)
     assert 1.0 in edges
+
+
+@pytest.mark.parametrize(
+    "values",
+    [[1e-300, 1e300], [1.7e308, 0.5], [5e-324, 2.0], [1e-30, 1e30], [], [0.0, -1.0, math.nan]],
+)
+def test_figure5_of_extreme_values_is_drawn_without_warnings(values):
+    data = histogram.from_values(np.array(values, dtype=float), np.array(values, dtype=float))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        figure = figures.figure5(data)
+        figures.save(figure, io.BytesIO(), "png")
+        figures.svg_text(figure)
+    left, right = figure.axes[0].get_xlim()
+    assert 0 < left < 1 < right < math.inf

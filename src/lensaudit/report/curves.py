@@ -89,13 +89,23 @@ def sample(
 #: How far below zero a sketch shows D(r), as a fraction of its top. Where D
 #: falls further, the sketch ends (the fold is plain by then).
 SKETCH_FLOOR = 0.5
+#: The top of a sketch, as a multiple of the larger of the corner and D(r_max).
+SKETCH_HEADROOM = 1.15
 
 
-def _sketch_range(curve: Curve) -> tuple[float, float]:
-    """(bottom, top) of a sketch's D axis: the peak or corner, and a little below 0."""
+def sketch_range(curve: Curve) -> tuple[float, float]:
+    """(bottom, top) of the D axis of :func:`sketch_svg`, Hugin units.
+
+    The top is :data:`SKETCH_HEADROOM` times the larger of the image corner
+    and D(r_max) (the largest sampled D when the model does not fold); the
+    bottom is 0, or lower by at most :data:`SKETCH_FLOOR` times the top.
+    """
     finite = curve.d[np.isfinite(curve.d)]
-    peak = float(finite.max()) if finite.size else 1.0
-    top = 1.15 * max(curve.r_corner if math.isfinite(curve.r_corner) else 0.0, peak, 1e-300)
+    peak = curve.d_max if math.isfinite(curve.d_max) else None
+    if peak is None:
+        peak = float(finite.max()) if finite.size else 1.0
+    corner = curve.r_corner if math.isfinite(curve.r_corner) else 0.0
+    top = SKETCH_HEADROOM * max(corner, peak, 1e-300)
     lowest = float(finite.min()) if finite.size else 0.0
     return min(0.0, max(lowest, -SKETCH_FLOOR * top)), top
 
@@ -104,19 +114,20 @@ def sketch_sample(
     entry: DistortionEntry, r_max: float, d_max: float, r_corner: float, points: int = 160
 ) -> Curve:
     """D(r) for :func:`sketch_svg`: from 0 to :func:`plot_extent`, or only up to where
-    D falls below the sketch's floor, so that the whole curve fits in the sketch."""
+    D leaves the sketch's range (see :func:`sketch_range`), so that the whole
+    curve fits in the sketch."""
     curve = sample(entry, r_max, d_max, r_corner, points)
-    bottom, _ = _sketch_range(curve)
-    below = np.flatnonzero(~(curve.d >= bottom))
-    if below.size == 0 or below[0] == 0:
+    bottom, top = sketch_range(curve)
+    outside = np.flatnonzero(~((curve.d >= bottom) & (curve.d <= top)))
+    if outside.size == 0 or outside[0] == 0:
         return curve
-    # D crosses the floor between two samples: bisect for the crossing, then
+    # D leaves the range between two samples: bisect for the crossing, then
     # sample again up to it (D is a polynomial, continuous).
     coefficients = distortion_coefficients(entry)
-    low, high = float(curve.r[below[0] - 1]), float(curve.r[below[0]])
+    low, high = float(curve.r[outside[0] - 1]), float(curve.r[outside[0]])
     for _ in range(60):
         middle = 0.5 * (low + high)
-        if np.polyval(coefficients, middle) >= bottom:
+        if bottom <= np.polyval(coefficients, middle) <= top:
             low = middle
         else:
             high = middle
@@ -142,7 +153,7 @@ def sketch_svg(curve: Curve, width: int = 260, height: int = 160) -> str:
     plot_w = width - pad_left - pad_right
     plot_h = height - pad_top - pad_bottom
     plot_bottom = pad_top + plot_h
-    bottom, top = _sketch_range(curve)
+    bottom, top = sketch_range(curve)
     x_end = float(curve.r[-1]) if curve.r.size and curve.r[-1] > 0 else 1.0
 
     def x(value: float) -> float:

@@ -93,20 +93,30 @@ def inline_svg(figure: Figure | str, prefix: str) -> str:
 FOLD_SHADE = "#fbe3e3"
 #: Margin of Figure 5's x axis beyond the outer bin edges, in decades.
 X_MARGIN_DECADES = 0.3
+#: Figure 5's x axis stays within [1 / X_SHOWN_MAX, X_SHOWN_MAX]: matplotlib's
+#: log ticks overflow on ranges of hundreds of decades. Only absurd models
+#: reach beyond; their bars are cut at the frame (they are in the CSV).
+X_SHOWN_MAX = 1e200
 
 
 def figure5_x_limits(edges: np.ndarray) -> tuple[float, float]:
     """x range of Figure 5: every bin, 1 and a margin of :data:`X_MARGIN_DECADES` below
-    both the first edge and 1 (so that the bins below 1 never sit on the frame)."""
+    both the first edge and 1 (so that the bins below 1 never sit on the frame),
+    within :data:`X_SHOWN_MAX`."""
     finite = edges[np.isfinite(edges) & (edges > 0)]
     low = min(float(finite[0]) if finite.size else 1.0, 1.0)
     high = max(float(finite[-1]) if finite.size else 1.0, 1.0)
     margin = 10.0**X_MARGIN_DECADES
-    tiny, huge = np.finfo(np.float64).tiny, np.finfo(np.float64).max
-    return max(low / margin, tiny), min(high * margin, huge)
+    return max(low / margin, 1 / X_SHOWN_MAX), min(high * margin, X_SHOWN_MAX)
 
 
 def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: str) -> None:
+    # Scales and limits first: autoscaling a log axis to bars near the largest
+    # float would overflow.
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    low, high = figure5_x_limits(histogram.edges)
+    axes.set_xlim(low, high)
     top = np.finfo(np.float64).max
     edges = np.minimum(histogram.edges, top)
     shown = counts > 0
@@ -122,10 +132,6 @@ def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: st
             linewidth=0.4,
             label=label,
         )
-    axes.set_xscale("log")
-    axes.set_yscale("log")
-    low, high = figure5_x_limits(histogram.edges)
-    axes.set_xlim(low, high)
     axes.axvspan(low, 1.0, color=FOLD_SHADE, linewidth=0, zorder=0)
     axes.axvline(1.0, color=RED, linestyle="--", linewidth=1.2)
     # The bins below 1 are the point of the figure but only a few pixels wide
