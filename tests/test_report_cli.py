@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 from click.testing import CliRunner
@@ -135,3 +138,43 @@ def test_default_is_the_bundled_database(runner, tmp_path):
     assert result.exit_code == 0, result.output
     provenance = json.loads((target / "summary.json").read_text())["provenance"]
     assert provenance["database"].startswith("Lensfun database bundled with lensfunpy")
+
+
+# Runs the command line in a fresh interpreter and prints, last, which heavy
+# modules it imported.
+IMPORTS_SCRIPT = """
+import json, sys
+from lensaudit.cli import main
+try:
+    main(sys.argv[1:], prog_name="lensaudit")
+except SystemExit:
+    pass
+print(json.dumps(sorted(m for m in ("matplotlib", "pandas") if m in sys.modules)))
+"""
+
+
+def heavy_imports(arguments, tmp_path):
+    environment = {"LENSAUDIT_CACHE_DIR": str(tmp_path / "cache")}
+    result = subprocess.run(
+        [sys.executable, "-c", IMPORTS_SCRIPT, *arguments],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+        env={**os.environ, **environment},
+    )
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize(
+    "arguments",
+    [["report", "--help"], ["plot", "--help"], ["plot", "warp", "--help"], ["scan", "DB"]],
+)
+def test_commands_that_draw_nothing_do_not_import_matplotlib(arguments, small_db, tmp_path):
+    arguments = [str(small_db) if a == "DB" else a for a in arguments]
+    assert heavy_imports(arguments, tmp_path) == []
+
+
+def test_a_report_imports_matplotlib_to_draw_figure5_and_not_pandas(small_db, tmp_path):
+    arguments = ["report", str(small_db), "-o", str(tmp_path / "out")]
+    assert heavy_imports(arguments, tmp_path) == ["matplotlib"]
