@@ -1,0 +1,171 @@
+"""`lensaudit check --baseline <parent>` replayed on commits of Lensfun's real history.
+
+Each commit is checked against its first parent, as Lensfun's CI would, and
+every failure is judged by scripts/replay_check.py's oracle: a failing
+finding is justified only if it points into a <lens> block (or, for a
+finding about a file, a file) that the commit's `git diff -U0` touches.
+
+The commits: three that an earlier matching blamed for lenses they did not
+touch (c6d214b and 5bb936c repair a file their parent broke, e7fb3bd only
+renames a lens), the commits that broke those files, and the other kinds of
+real mistakes in the last 300 commits (focal="0", a duplicated focal
+length), with a commit on each side of every one of them.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLE = ROOT.parent / "shared" / "data" / "lensfun-db-history.bundle"
+
+pytestmark = [
+    pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed"),
+    pytest.mark.skipif(
+        not BUNDLE.is_file(),
+        reason=f"no Lensfun history bundle at {BUNDLE} (../shared/data from the repository)",
+    ),
+]
+
+#: Commits the diff shows to be mistakes, and the finding each must fail with.
+REAL_CATCHES = {
+    "ebb76e8": "xml-error",  # slr-pentax.xml: a lens left unclosed
+    "f8ee304": "xml-error",  # slr-tokina.xml: "--" inside a comment
+    "44e316e": "xml-error",  # mil-canon.xml: </lens> missing
+    "37b3b4e": "duplicate-focal",  # mil-canon.xml: two different 500 mm entries
+    "f95fa20": "bad-value",  # slr-tokina.xml: focal="0"
+}
+#: Commits that change nothing a finding is about.
+MUST_PASS = {
+    "c6d214b": "repairs slr-tokina.xml; the Tokina 11-16 fold dates from 2014",
+    "5bb936c": "repairs mil-canon.xml; its duplicate 500 mm entry was there before",
+    "e7fb3bd": "renames Canon RF200-800mm to RF 200-800mm, duplicate entry unchanged",
+}
+#: Neighbours, so that each commit above is replayed in its window.
+NEIGHBOURS = (
+    "76b4afc",  # repairs slr-pentax.xml, broken by ebb76e8
+    "5709184",
+    "322006c",
+    "b57cdc2",
+    "b1725bd",
+    "c153423",
+    "b58144a",
+    "0e35124",
+    "4379cae",
+    "44cbca5",
+    "f70c0fe",
+    "03d3b33",
+)
+
+
+def load_replay():
+    spec = importlib.util.spec_from_file_location(
+        "replay_check", ROOT / "scripts" / "replay_check.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("replay_check", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+replay_check = load_replay()
+
+
+@pytest.fixture(scope="module")
+def history(tmp_path_factory) -> Path:
+    """A clone of the Lensfun history bundle."""
+    clone = tmp_path_factory.mktemp("history") / "lensfun"
+    subprocess.run(
+        ["git", "clone", "--quiet", "--no-checkout", str(BUNDLE), str(clone)],
+        check=True,
+        capture_output=True,
+    )
+    return clone
+
+
+@pytest.fixture(scope="module")
+def verdicts(history, tmp_path_factory) -> dict[str, replay_check.Row]:
+    """Each replayed commit's row, by the short id used above, oldest first."""
+    names = [*REAL_CATCHES, *MUST_PASS, *NEIGHBOURS]
+    full = {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in names}
+    order = replay_check.window(history, None, None, ())  # the last 300, oldest first
+    commits = [c for c in order if c in full.values()]
+    assert len(commits) == len(names)
+    short = {commit: name for name, commit in full.items()}
+    return {short[row.commit]: row for row in replay_check.replay(history, commits)}
+
+
+def test_no_commit_of_the_window_is_blamed_for_what_it_did_not_change(verdicts):
+    blamed = {name: row.findings for name, row in verdicts.items() if row.verdict != "pass"}
+    assert not {n: f for n, f in blamed.items() if n not in REAL_CATCHES}
+    assert all(row.verdict != replay_check.FALSE_BLAME for row in verdicts.values())
+
+
+@pytest.mark.parametrize("commit", sorted(MUST_PASS))
+def test_commit_that_changes_no_finding_passes(verdicts, commit):
+    row = verdicts[commit]
+    assert row.verdict == replay_check.PASS, (MUST_PASS[commit], row.findings)
+
+
+@pytest.mark.parametrize("commit", sorted(REAL_CATCHES))
+def test_real_mistake_still_fails_with_a_justified_finding(verdicts, commit):
+    row = verdicts[commit]
+    assert row.verdict == replay_check.FAIL_JUSTIFIED, row.findings
+    assert [finding.split()[0] for finding in row.findings] == [REAL_CATCHES[commit]]
+
+
+# -- the oracle itself, on hand-made input -----------------------------------------------
+
+TEXT = b"""<lensdatabase>
+  <lens>
+    <model>A</model>
+  </lens>
+  <lens>
+    <model>B</model>
+  </lens>
+</lensdatabase>
+"""
+
+
+def test_lens_blocks_are_found_from_the_text():
+    assert replay_check.lens_blocks(TEXT) == [(2, 4), (5, 7)]
+
+
+def test_an_unclosed_lens_block_runs_to_the_next_lens():
+    assert replay_check.lens_blocks(TEXT.replace(b"  </lens>\n  <lens>", b"  <lens>", 1)) == [
+        (2, 3),
+        (4, 6),
+    ]
+
+
+def test_a_finding_in_an_untouched_block_is_not_justified():
+    touched = {"db/a.xml": replay_check.Touched(lines={6})}
+    blocks = {"db/a.xml": replay_check.lens_blocks(TEXT)}
+    assert not replay_check.justified([("db/a.xml", 3)], False, touched, blocks)
+    assert replay_check.justified([("db/a.xml", 7)], False, touched, blocks)
+
+
+def test_a_deletion_inside_a_block_touches_it():
+    touched = {"db/a.xml": replay_check.Touched(gaps={2})}
+    blocks = {"db/a.xml": replay_check.lens_blocks(TEXT)}
+    assert replay_check.justified([("db/a.xml", 3)], False, touched, blocks)
+    assert not replay_check.justified([("db/a.xml", 6)], False, touched, blocks)
+
+
+def test_a_pair_finding_is_justified_by_either_of_its_two_places():
+    touched = {"db/b.xml": replay_check.Touched(lines={1})}
+    blocks = {"db/a.xml": replay_check.lens_blocks(TEXT), "db/b.xml": [(1, 3)]}
+    assert replay_check.justified([("db/a.xml", 3), ("db/b.xml", 2)], False, touched, blocks)
+
+
+def test_a_file_level_finding_is_justified_by_any_change_to_its_file():
+    touched = {"db/a.xml": replay_check.Touched(lines={8})}
+    blocks = {"db/a.xml": replay_check.lens_blocks(TEXT)}
+    assert replay_check.justified([("db/a.xml", 3)], True, touched, blocks)
+    assert not replay_check.justified([("db/c.xml", 3)], True, touched, blocks)
