@@ -286,14 +286,30 @@ def test_a_coefficient_missing_from_the_file_is_added(tmp_path):
     assert re.search(r' c="[-0-9.]+" b="[-0-9.]+"/>', new_line)
 
 
-def test_an_entry_moved_since_the_audit_is_refused(tmp_path):
+def test_an_entry_moved_since_the_audit_is_not_patched_and_says_why(tmp_path):
     xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
     path = tmp_path / "one.xml"
     path.write_text(xml)
     audit = run(str(path))
     path.write_text("\n" + xml)
-    with pytest.raises(PatchError, match=r"one\.xml:\d+: .*changed since it was read"):
-        fix.read_sources(audit, fix.select(audit))
+    indices = fix.select(audit)
+    sources = fix.read_sources(audit, indices)
+    (result,) = fix.fix_audit(audit, indices, sources=sources)
+    assert result.status == fix.STATUS_NOT_LOCATED
+    assert "no <distortion> element ends on this line" in result.message
+    assert "changed since it was read" in result.message
+    assert fix.patches([result], sources) == []
+
+
+def test_an_element_written_with_character_references_is_not_patched(tmp_path):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="&#45;0.024" b="-0.002" c="0.005"/>')
+    path = tmp_path / "one.xml"
+    path.write_text(xml)
+    audit = run(str(path))
+    indices = fix.select(audit)
+    (result,) = fix.fix_audit(audit, indices, sources=fix.read_sources(audit, indices))
+    assert result.status == fix.STATUS_NOT_LOCATED and "character references" in result.message
+    assert result.new  # the refit is still shown
 
 
 def test_a_file_changed_between_reading_and_writing_is_not_written(tmp_path):

@@ -42,8 +42,9 @@ r_corner, and the root mean square over the image's own frame (aspect x 1).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -78,6 +79,7 @@ MIN_SIGNIFICANT_DIGITS = 5
 STATUS_FIXED = "fixed"
 STATUS_BEYOND_TOLERANCE = "beyond_tolerance"
 STATUS_NO_SOLUTION = "no_solution"
+STATUS_NOT_LOCATED = "not_located"
 
 _GRID_POINTS = 161  # points of each grid of the linear program
 _SEARCH_POINTS = 9  # values of T tried before the bounded search
@@ -632,45 +634,51 @@ def _matches(entry: DistortionEntry) -> Any:
 
 @dataclass
 class SourceTexts:
-    """The files behind some entries: their bytes, and each entry's start tag."""
+    """The files behind some entries: their bytes, each entry's start tag, and
+    why an entry's element could not be found (by entry index)."""
 
     files: dict[str, tuple[Any, bytes]] = field(default_factory=dict)  # name -> (path, bytes)
     tags: dict[int, StartTag] = field(default_factory=dict)  # entry index -> tag
+    problems: dict[int, str] = field(default_factory=dict)  # entry index -> why not found
 
-    def texts(self, index: int) -> dict[str, str]:
-        """The raw attribute values of an entry's ``<distortion>``."""
-        return self.tags[index].values()
+    def texts(self, index: int) -> dict[str, str] | None:
+        """The raw attribute values of an entry's ``<distortion>``, if found."""
+        tag = self.tags.get(index)
+        return tag.values() if tag is not None else None
 
 
 def read_sources(audit: Audit, indices: Sequence[int]) -> SourceTexts:
     """Read the files of the given entries and find each entry's start tag.
 
-    Raises :class:`lensaudit.xmlpatch.PatchError`, its message naming the
-    file and line, when an entry is not where the audit found it (the file
-    changed since) or its file cannot be read.
+    An entry whose element is no longer on its line with its values (the
+    file changed since the audit read it), or whose file cannot be read, is
+    noted in ``problems`` with the reason.
     """
     from . import xmlpatch
     from .loader import read_file
 
     paths = {f.name: f.path for f in audit.files}
+    unreadable: dict[str, str] = {}
     sources = SourceTexts()
     for index in indices:
         entry = audit.entries[index]
-        if entry.file not in sources.files:
+        if entry.file not in sources.files and entry.file not in unreadable:
             try:
                 sources.files[entry.file] = (paths[entry.file], read_file(paths[entry.file]))
             except OSError as error:
-                raise xmlpatch.PatchError(
-                    f"{entry.file}: cannot read: {error.strerror or error}"
-                ) from None
+                unreadable[entry.file] = f"cannot read the file again: {error.strerror or error}"
+        if entry.file in unreadable:
+            sources.problems[index] = unreadable[entry.file]
+            continue
         data = sources.files[entry.file][1]
         try:
             sources.tags[index] = xmlpatch.locate(data, "distortion", entry.line, _matches(entry))
         except xmlpatch.PatchError as error:
-            raise xmlpatch.PatchError(
-                f"{entry.file}:{entry.line}: {error}; the file changed since it was read "
-                "(run again), or writes the element in a form this command does not patch"
-            ) from None
+            reason = re.sub(r"^line \d+: ", "", str(error))
+            sources.problems[index] = (
+                f"{reason}: the file changed since it was read (run again), or writes "
+                "the element in a form that is not patched (character references)"
+            )
     return sources
 
 
@@ -686,7 +694,8 @@ def fix_audit(
     """:func:`fix_entry` for the given entries of an audit (see :func:`select`).
 
     With ``sources`` (:func:`read_sources`), the number format of each entry
-    is taken from its file.
+    is taken from its file, and an entry whose element was not found there
+    gets status ``not_located`` (its refit is still computed and shown).
     """
     results = []
     for index in indices:
@@ -694,14 +703,11 @@ def fix_audit(
         result = fix_entry(
             audit.entries[index], margin=margin, target=target, tolerance=tolerance, texts=texts
         )
-        results.append(_with_index(result, index))
+        result = replace(result, index=index)
+        if sources is not None and index in sources.problems:
+            result = replace(result, status=STATUS_NOT_LOCATED, message=sources.problems[index])
+        results.append(result)
     return results
-
-
-def _with_index(result: FixResult, index: int) -> FixResult:
-    from dataclasses import replace
-
-    return replace(result, index=index)
 
 
 def patches(results: Sequence[FixResult], sources: SourceTexts) -> list[FilePatch]:
