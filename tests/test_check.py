@@ -237,6 +237,14 @@ def test_broken_file_is_one_error_with_line_and_column_and_other_files_are_check
     ]
 
 
+def test_well_formed_file_with_another_root_is_one_not_a_database_error(write_xml):
+    xml = "<html>\n<body><distortion model='poly3' focal='10' k1='-0.3'/></body>\n</html>\n"
+    result = check(write_xml(xml))
+    assert codes(result) == [("error", "not-a-database", 1)]
+    assert "root element is <html>" in result.findings[0].message
+    assert result.files[0].entries == 1
+
+
 def test_tca_after_the_root_element_is_an_xml_error(write_xml):
     # Not well-formed, whatever shortcut a parse may take past <tca> elements.
     xml = lens_xml('<distortion model="poly3" focal="10" k1="0.1"/>') + (

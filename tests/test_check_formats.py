@@ -199,3 +199,26 @@ def test_relative_to_rewrites_paths_under_the_root_only():
     moved = check_result.relative_to("/repo/data")
     assert [f.file for f in moved.findings] == ["db/a.xml", "/elsewhere/x.xml"]
     assert [f.file for f in moved.files] == ["db/a.xml", "/elsewhere/x.xml"]
+
+
+def test_relative_to_takes_the_deepest_root_holding_each_file():
+    files = [
+        CheckedFile("/repo/data/db/a.xml", Path("/repo/data/db/a.xml"), 1),
+        CheckedFile("/repo/vendor/db/b.xml", Path("/repo/vendor/db/b.xml"), 1),
+    ]
+    duplicate = Finding(
+        "error", "duplicate-lens", "/repo/vendor/db/b.xml", 2, 0, "m",
+        related=(("/repo/data/db/a.xml", 5),),
+    )  # fmt: skip
+    moved = CheckResult("db", None, 1.1, files, [duplicate]).relative_to("/repo", "/repo/vendor")
+    assert [f.file for f in moved.files] == ["data/db/a.xml", "db/b.xml"]
+    assert moved.findings[0].file == "db/b.xml"
+    assert moved.findings[0].related == (("data/db/a.xml", 5),)
+
+
+def test_json_gives_the_place_a_duplicate_repeats():
+    duplicate = Finding(
+        "error", "duplicate-focal", "data/db/a.xml", 13, 0, "m", related=(("data/db/a.xml", 12),)
+    )
+    [finding] = json.loads(render("json", result(duplicate)))["findings"]
+    assert finding["related"] == [{"file": "data/db/a.xml", "line": 12}]
