@@ -248,3 +248,23 @@ def test_sketch_of_a_model_that_rises_again_ends_at_its_top(write_xml):
     assert curve.r[-1] == pytest.approx(crossing, rel=1e-9)
     root, *_ = svg_points(curves.sketch_svg(curve))
     assert root.find("polyline") is not None and float(m.r_max[index]) == 0.0
+
+
+@pytest.mark.parametrize(
+    "lens",
+    ["Sigma 4.5mm f/2.8 EX DC HSM circular fisheye", "A" * 40 + " " + "very long name " * 12],
+)
+def test_curve_figure_title_lies_inside_the_figure(audit, lens):
+    index = select.by_location(audit, "slr-sigma.xml", 3239)
+    m = audit.metrics
+    curve = curves.sample(
+        audit.entries[index], float(m.r_max[index]), float(m.d_max[index]), float(m.r_corner[index])
+    )
+    title = f"{lens} at 4.5 mm, crop 1.534, ptlens (slr-sigma.xml:3239)\nr_normalized = 0.604"
+    figure = figures.curve_figure(curve, title)
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    shown = figure.axes[0].title
+    assert shown.get_text().split() == title.split()
+    assert inside(shown.get_window_extent(renderer), figure.bbox)
+    assert shown.get_window_extent(renderer).y0 >= figure.axes[0].get_window_extent(renderer).y1

@@ -252,8 +252,28 @@ def curve_figure(curve: Curve, title: str) -> Figure:
     for axes in (top, bottom):
         axes.grid(True, color="#e5e5e5", linewidth=0.5)
         axes.legend(loc="best", fontsize=8, frameon=False)
-    top.set_title(title, fontsize=9)
-    figure.subplots_adjust(left=0.11, right=0.98, top=0.93, bottom=0.09, hspace=0.08)
+    # Long lens names: wrap the title to the figure's width and make room for it.
+    renderer = figure.canvas.get_renderer()
+    font = FontProperties(size=9)
+
+    def measure(line: str) -> float:
+        return renderer.get_text_width_height_descent(line, font, ismath=False)[0]
+
+    left, right = 0.11, 0.98
+    # The title is centred over the axes, so it has twice the shorter distance
+    # from their centre to an edge of the figure.
+    usable = 2 * min((left + right) / 2, 1 - (left + right) / 2) * figure.bbox.width - 12
+    lines = [wrap_to_width(line, usable, measure) or line for line in title.split("\n")]
+    top.set_title("\n".join(lines), fontsize=9)
+    count = sum(line.count("\n") + 1 for line in lines)
+    title_pixels = count * 1.25 * 9 * figure.dpi / 72 + 12
+    figure.subplots_adjust(
+        left=left,
+        right=right,
+        top=1 - title_pixels / figure.bbox.height,
+        bottom=0.09,
+        hspace=0.08,
+    )
     return figure
 
 
