@@ -463,3 +463,26 @@ def test_json_holds_results_and_diff(runner, tmp_path):
     assert entry["status"] == "fixed" and isinstance(entry["a_new"], float)
     assert document["diff"].startswith("--- a/one.xml")
     assert "6000x4000" in document["units"]["changes"]
+
+
+def test_write_leaves_every_file_alone_when_one_changed_meanwhile(runner, tmp_path, monkeypatch):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    (tmp_path / "db").mkdir()
+    first, second = tmp_path / "db" / "a.xml", tmp_path / "db" / "b.xml"
+    first.write_text(xml)
+    second.write_text(xml)
+    computed = fix.patches
+
+    def edited_meanwhile(*args, **kwargs):
+        found = computed(*args, **kwargs)
+        second.write_text(xml + "<!-- edited -->\n")
+        return found
+
+    monkeypatch.setattr(fix, "patches", edited_meanwhile)
+    result = runner.invoke(main, ["fix", str(tmp_path / "db"), "--write"])
+    assert result.exit_code == 2
+    assert (
+        result.output
+        == "lensaudit: error: b.xml: the file changed since it was read; nothing written\n"
+    )
+    assert first.read_text() == xml

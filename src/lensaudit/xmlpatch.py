@@ -227,6 +227,20 @@ def unified_diff(patch: FilePatch) -> str:
     return text
 
 
+def check_unchanged(patch: FilePatch) -> int:
+    """Raise :class:`PatchError` unless the file still holds what the patch was
+    computed from; return the file's permission bits."""
+    path = Path(patch.path)
+    try:
+        current = path.read_bytes()
+        mode = path.stat().st_mode & 0o7777
+    except OSError as error:
+        raise PatchError(f"{patch.name}: cannot read again: {error.strerror or error}") from None
+    if current != patch.original:
+        raise PatchError(f"{patch.name}: the file changed since it was read; nothing written")
+    return mode
+
+
 def write(patch: FilePatch) -> None:
     """Write the patched content in place of the file, atomically.
 
@@ -237,13 +251,7 @@ def write(patch: FilePatch) -> None:
     a file; the original's permission bits are kept.
     """
     path = Path(patch.path)
-    try:
-        current = path.read_bytes()
-        mode = path.stat().st_mode & 0o7777
-    except OSError as error:
-        raise PatchError(f"{patch.name}: cannot read again: {error.strerror or error}") from None
-    if current != patch.original:
-        raise PatchError(f"{patch.name}: the file changed since it was read; nothing written")
+    mode = check_unchanged(patch)
     descriptor, temporary = tempfile.mkstemp(
         prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
     )

@@ -103,15 +103,16 @@ def fix(
     significant digits).
 
     Changes of D are in pixels of a 6000x4000 frame: Hugin r = 1, half the
-    short side, is 2000 px. An entry counts as fixed when the largest change
-    is within --tolerance; the others are reported with the reason.
+    short side, is 2000 px: the largest change over radii 0 to the corner,
+    and the RMS over the image. An entry counts as fixed when the largest
+    change is within --tolerance; the others are reported with the reason.
 
     PATH is a database directory or XML files; without PATH, the database
     bundled with lensfunpy is examined (and never written). Without --write,
     the unified diff of what would change is printed. With --write, the files
     are patched in place: only the changed attribute values, every other byte
-    as it was, each file replaced atomically, and none if a file changed
-    since it was read.
+    as it was, each file replaced atomically; if any file changed since it
+    was read, none is written.
 
     \b
     Exit status:
@@ -134,7 +135,7 @@ def fix(
             "(the database bundled with lensfunpy is not written)"
         )
     from .. import fix as stage
-    from ..xmlpatch import PatchError, unified_diff
+    from ..xmlpatch import PatchError, check_unchanged, unified_diff
     from ..xmlpatch import write as write_patch
 
     indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
@@ -148,12 +149,16 @@ def fix(
         fail(str(error))
     written: list[str] = []
     if write:
-        for patch in patches:
-            try:
+        try:
+            # Every file is checked before any is written, so that a run
+            # refused for one changed file leaves all of them as they were.
+            for patch in patches:
+                check_unchanged(patch)
+            for patch in patches:
                 write_patch(patch)
-            except PatchError as error:
-                fail(str(error))
-            written.append(patch.name)
+                written.append(patch.name)
+        except PatchError as error:
+            fail(str(error))
     diff = "" if write else "".join(unified_diff(p) for p in patches)
     settings = {
         "margin": margin,
