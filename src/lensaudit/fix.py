@@ -573,6 +573,12 @@ def fix_entry(
         )
         if len(names) == 1:
             message += f"; {entry.model} has a single coefficient"
+        if entry.type not in ("rectilinear", ""):
+            # A circular fisheye's picture ends at its image circle, short of
+            # the frame's corner that the fold is measured against.
+            message += (
+                f"; a {entry.type} lens whose image circle ends inside the frame may not need it"
+            )
     return FixResult(
         **common,
         new=new,
