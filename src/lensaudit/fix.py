@@ -577,7 +577,8 @@ def fix_entry(
             # A circular fisheye's picture ends at its image circle, short of
             # the frame's corner that the fold is measured against.
             message += (
-                f"; a {entry.type} lens whose image circle ends inside the frame may not need it"
+                f"; the lens is of type {entry.type}: if its image circle ends inside "
+                "the frame, the fold may lie outside the picture"
             )
     return FixResult(
         **common,
