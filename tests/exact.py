@@ -3,11 +3,14 @@
 The binary64 inputs are taken exactly as rationals. Roots of odd multiplicity
 are separated from the others exactly (square-free decomposition with
 rationals), their number on (0, inf) is counted exactly (Sturm's theorem), and
-only then located numerically with mpmath at 60 significant digits.
+only then located numerically with mpmath at 60 significant digits, or, over
+the whole binary64 range, by bisection in exact rationals
+(:func:`odd_root_bracket`).
 """
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 import mpmath
@@ -167,3 +170,89 @@ def reference(a: float, b: float, c: float) -> tuple[mpmath.mpf, mpmath.mpf]:
     if not others:
         return root, INF
     return root, others[0] / abs(root)
+
+
+# -- the whole binary64 range ------------------------------------------------------------
+#
+# mpmath's polyroots struggles when the roots differ by hundreds of orders of
+# magnitude, so over the whole range the root is isolated in exact arithmetic
+# alone: Sturm's theorem on the odd-multiplicity part counts roots in (0, X] for
+# rational X, and bisection over powers of two, then within one binade, narrows
+# the smallest one down.
+
+#: The largest binary64 number, exactly.
+MAX_FLOAT = Fraction(1.7976931348623157e308)
+
+
+def _integer_polynomial(p: Poly) -> list[int]:
+    """p times the (positive) common denominator of its coefficients."""
+    denominator = 1
+    for x in p:
+        denominator = denominator * x.denominator // math.gcd(denominator, x.denominator)
+    return [int(x * denominator) for x in p]
+
+
+def _integer_sign(p: list[int], x: Fraction) -> int:
+    """Sign of p(x), by Horner's rule on p(n/d) d^deg in integers."""
+    n, d = x.numerator, x.denominator
+    value, power = 0, 1
+    for coefficient in reversed(p):
+        value = value * n + coefficient * power
+        power *= d
+    # value = d^deg p(n/d), and d > 0.
+    return (value > 0) - (value < 0)
+
+
+def _variations(sequence: list[list[int]], x: Fraction | None) -> int:
+    """Sign variations of the Sturm sequence at x (None: at +infinity)."""
+    if x is None:
+        values = [s[-1] for s in sequence if s]
+    else:
+        values = [_integer_sign(s, x) for s in sequence]
+    return _sign_changes(values)
+
+
+def odd_root_bracket(a: float, b: float, c: float, bits: int = 90) -> tuple[Fraction, Fraction] | None:
+    """(lo, hi] holding the smallest w > 0 where 1 + a w + b w^2 + c w^3 changes sign.
+
+    Exact rationals with hi - lo <= 2^-bits lo; None where there is no such w.
+    """
+    p = _trim([Fraction(1), Fraction(a), Fraction(b), Fraction(c)])
+    odd = _odd_multiplicity_part(p) if len(p) > 1 else [Fraction(1)]
+    if len(odd) <= 1:
+        return None
+    sequence = [_integer_polynomial(s) for s in _sturm_sequence(odd)]
+    at_zero = _variations(sequence, Fraction(0))
+    if at_zero - _variations(sequence, None) == 0:
+        return None
+
+    def any_root_up_to(x: Fraction) -> bool:
+        return at_zero - _variations(sequence, x) > 0
+
+    # Every root exceeds 2^-1100 (1/(3 max(|a|, |b|^1/2, |c|^1/3)) > 2^-1027) and
+    # lies below 2^2200 (|b/c| < 2^2098, the Cauchy bound).
+    low, high = -1100, 2200
+    while high - low > 1:
+        middle = (low + high) // 2
+        if any_root_up_to(Fraction(2) ** middle):
+            high = middle
+        else:
+            low = middle
+    lo, hi = Fraction(2) ** low, Fraction(2) ** high
+    for _ in range(bits):
+        middle = (lo + hi) / 2
+        if any_root_up_to(middle):
+            hi = middle
+        else:
+            lo = middle
+    return lo, hi
+
+
+def exceeds_max_float(a: float, b: float, c: float) -> bool:
+    """True where there is no sign change of 1 + a w + b w^2 + c w^3 in (0, MAX_FLOAT]."""
+    p = _trim([Fraction(1), Fraction(a), Fraction(b), Fraction(c)])
+    odd = _odd_multiplicity_part(p) if len(p) > 1 else [Fraction(1)]
+    if len(odd) <= 1:
+        return True
+    sequence = [_integer_polynomial(s) for s in _sturm_sequence(odd)]
+    return _variations(sequence, Fraction(0)) == _variations(sequence, MAX_FLOAT)
