@@ -151,7 +151,11 @@ def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: st
                 # Over the dashed line at 1 when the bin touches it: keep the count legible.
                 bbox={"facecolor": "white", "edgecolor": "none", "pad": 0.6},
             )
-    axes.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    # Plain numbers (0.5, 1, 10, 100) read better than powers of ten here, and
+    # need no mathtext.
+    plain = FuncFormatter(lambda value, _: f"{value:g}")
+    axes.xaxis.set_major_formatter(plain)
+    axes.yaxis.set_major_formatter(plain)
     axes.grid(True, which="major", color="#dddddd", linewidth=0.5)
     axes.set_axisbelow(True)
 
