@@ -155,7 +155,11 @@ def fix(
             for patch in patches:
                 check_unchanged(patch)
             for patch in patches:
-                write_patch(patch)
+                try:
+                    write_patch(patch)
+                except OSError as error:
+                    done = f" (written before it: {', '.join(written)})" if written else ""
+                    fail(f"{patch.name}: cannot write: {error.strerror or error}{done}")
                 written.append(patch.name)
         except PatchError as error:
             fail(str(error))
