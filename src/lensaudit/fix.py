@@ -448,10 +448,12 @@ class FixResult:
 
     @property
     def where(self) -> str:
+        """``file:line`` of the entry's ``<distortion>``."""
         return f"{self.entry.file}:{self.entry.line}"
 
     @property
     def fixed(self) -> bool:
+        """Whether the refit meets its goal within the tolerance (and is written)."""
         return self.status == STATUS_FIXED
 
     def record(self) -> dict[str, Any]:

@@ -213,6 +213,7 @@ class FilePatch:
 
     @property
     def changed(self) -> bool:
+        """Whether the patch changes anything."""
         return self.original != self.patched
 
 
