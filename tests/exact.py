@@ -212,7 +212,9 @@ def _variations(sequence: list[list[int]], x: Fraction | None) -> int:
     return _sign_changes(values)
 
 
-def odd_root_bracket(a: float, b: float, c: float, bits: int = 90) -> tuple[Fraction, Fraction] | None:
+def odd_root_bracket(
+    a: float, b: float, c: float, bits: int = 90
+) -> tuple[Fraction, Fraction] | None:
     """(lo, hi] holding the smallest w > 0 where 1 + a w + b w^2 + c w^3 changes sign.
 
     Exact rationals with hi - lo <= 2^-bits lo; None where there is no such w.
