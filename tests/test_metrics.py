@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import warnings
+from fractions import Fraction
 
 import mpmath
 import numpy as np
 import pytest
 
+from exact import odd_root_bracket
 from lensaudit import metrics
 
 
@@ -95,3 +98,56 @@ def test_entries_not_audited_get_no_metrics():
     )
     assert np.isfinite(result.r_max[0]) and np.isnan(result.r_max[1])
     assert not result.folds_in_image[1] and result.tail[1] == 0
+
+
+# -- coefficients near the top of the binary64 range -------------------------------------
+
+
+def exact_fold(distortion: list[Fraction], power: int) -> tuple[Fraction, Fraction]:
+    """(r_max, d_max) in exact arithmetic: D(r) highest power first, w = r**power."""
+    degree = len(distortion) - 1
+    slope = [(j + 1) * distortion[degree - j - 1] for j in range(degree)]  # D', lowest first
+    cubic = (slope[::power] + [Fraction(0)] * 4)[:4]
+    lo, hi = odd_root_bracket(*(x / cubic[0] for x in cubic[1:]))
+    w = (lo + hi) / 2
+    # The root of w = r^2 to 80 bits, by bisection in rationals.
+    r = w
+    if power == 2:
+        low, high = Fraction(0), max(w, Fraction(1))
+        for _ in range(200):
+            middle = (low + high) / 2
+            low, high = (middle, high) if middle * middle < w else (low, middle)
+        r = low
+    d_max = Fraction(0)
+    for x in distortion:
+        d_max = d_max * r + x
+    return r, d_max
+
+
+def relative_error(got: float, expected: Fraction) -> float:
+    return float(abs(Fraction(got) - expected) / abs(expected))
+
+
+@pytest.mark.parametrize(
+    ("model", "coefficients", "distortion", "power"),
+    [
+        # D'(r) = 4e308 r^3 - 2e308 r + 1 first falls to zero near r = 5e-309.
+        ("ptlens", dict(a=1e308, b=0.0, c=-1e308), [1e308, 0, -1e308, 1, 0], 1),
+        ("ptlens", dict(a=-1e308, b=1e308, c=0.0), [-1e308, 1e308, 0, 1, 0], 1),
+        ("poly5", dict(k1=1e308, k2=-1e308), [-1e308, 0, 1e308, 0, 1, 0], 2),
+        ("poly3", dict(k1=-1e308), [-1e308, 0, 1 + Fraction(1e308), 0], 2),
+    ],
+)
+def test_coefficients_near_the_largest_double_keep_every_number_without_warnings(
+    model, coefficients, distortion, power
+):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = compute(model, **coefficients)
+    r_max, d_max = exact_fold([Fraction(x) for x in distortion], power)
+    corner = Fraction(math.sqrt(13) / 2)
+    assert relative_error(result.r_max[0], r_max) < 1e-12
+    assert relative_error(result.d_max[0], d_max) < 1e-12
+    assert relative_error(result.r_normalized[0], d_max / corner) < 1e-12
+    assert result.tail[0] == (1 if distortion[0] > 0 else -1)
+    assert result.folds_in_image[0] == (d_max < corner)

@@ -12,7 +12,9 @@ to reproduce the paper's Figure 5.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,13 +64,69 @@ def cubic_r_max(cubic: normalizer.Cubic) -> FloatArray:
 
 def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArray[np.int8]]:
     """(r_max, d_max, tail sign) for a normalized model."""
-    r_max = cubic_r_max(cubic)
-    finite = np.isfinite(r_max)
-    d_max = np.where(
-        finite, normalizer.evaluate(cubic.distortion, np.where(finite, r_max, 0)), r_max
-    )
+    with np.errstate(all="ignore"):
+        r_max = cubic_r_max(cubic)
+        finite = np.isfinite(r_max)
+        d_max = np.where(
+            finite, normalizer.evaluate(cubic.distortion, np.where(finite, r_max, 0)), r_max
+        )
     tail = np.where(finite, normalizer.leading_sign(cubic.distortion), 0).astype(np.int8)
     return r_max, d_max, tail
+
+
+def _exact_distortion(
+    model: str, a: float, b: float, c: float, k1: float, k2: float
+) -> list[Fraction]:
+    """Coefficients of D(r) as written, highest power first, in exact arithmetic."""
+    if model == "ptlens":
+        a_, b_, c_ = Fraction(a), Fraction(b), Fraction(c)
+        return [a_, b_, c_, 1 - a_ - b_ - c_, Fraction(0)]
+    if model == "poly3":
+        return [Fraction(k1), Fraction(0), 1 - Fraction(k1), Fraction(0)]
+    return [Fraction(k2), Fraction(0), Fraction(k1), Fraction(0), Fraction(1), Fraction(0)]
+
+
+def _nearest_double(x: Fraction) -> float:
+    """x rounded to binary64; +-inf beyond the largest double."""
+    try:
+        return float(x)
+    except OverflowError:
+        return math.copysign(math.inf, x)
+
+
+def _exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, float, int]:
+    """(r_max, d_max, tail sign) of one model from its exact coefficients.
+
+    For models whose cubic overflows binary64 (coefficients near 1e308):
+    the cubic is formed exactly, scaled as w = 2^k v so that its coefficients
+    fit (k <= 0, even for w = r^2), rounded once and solved; d_max = D(r_max)
+    is evaluated exactly and rounded once, so no intermediate overflows.
+    """
+    degree = len(distortion) - 1
+    # D'(r), lowest power first; its powers of w are every power-th one.
+    slope = [(j + 1) * distortion[degree - j - 1] for j in range(degree)]
+    cubic = (slope[::power] + [Fraction(0)] * 4)[:4]
+    leading = next((x for x in distortion if x != 0), Fraction(0))
+    tail = (leading > 0) - (leading < 0)
+    if cubic[0] <= 0:  # not increasing at the centre: no valid domain
+        return 0.0, 0.0, tail
+    normalized = [x / cubic[0] for x in cubic[1:]]
+    k = 0
+    for m, x in enumerate(normalized, start=1):
+        if x != 0:
+            size = x.numerator.bit_length() - x.denominator.bit_length()  # log2|x| within 1
+            k = min(k, (1000 - size) // m)
+    k -= k % power
+    scaled = [_nearest_double(x * Fraction(2) ** (m * k)) for m, x in enumerate(normalized, 1)]
+    w = min_positive_root(*scaled)
+    r_max = math.ldexp(w, k) if power == 1 else math.ldexp(math.sqrt(w), k // 2)
+    if not math.isfinite(r_max):
+        return r_max, r_max, 0
+    r = Fraction(r_max)
+    d_max = Fraction(0)
+    for x in distortion:
+        d_max = d_max * r + x
+    return r_max, _nearest_double(d_max), tail
 
 
 def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
@@ -122,8 +180,23 @@ def compute(
     }
     for name, build in builders.items():
         rows = np.flatnonzero(audited & (model == name))
-        if rows.size:
+        if not rows.size:
+            continue
+        with np.errstate(all="ignore"):  # overflow in the cubic is handled below
             r_max[rows], d_max[rows], tail[rows] = model_r_max(build(rows))
+        # Coefficients near the top of the binary64 range overflow the cubic or
+        # D(r_max) on the way: those rows again, exactly (few, if any).
+        overflowed = rows[
+            np.isnan(r_max[rows]) | (np.isfinite(r_max[rows]) & ~np.isfinite(d_max[rows]))
+        ]
+        for row in overflowed:
+            raw = [float(columns[n][row]) for n in ("a", "b", "c", "k1", "k2")]
+            used = {"ptlens": raw[:3], "poly3": raw[3:4], "poly5": raw[3:]}[name]
+            if all(math.isfinite(x) for x in used):
+                exact = _exact_distortion(name, *raw)
+                r_max[row], d_max[row], tail[row] = _exact_model_r_max(
+                    exact, 1 if name == "ptlens" else 2
+                )
     r_corner = np.where(audited, image_corner(aspect_ratio), np.nan)
     r_corner_paper = np.where(audited, paper_image_corner(crop_factor, focal), np.nan)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
