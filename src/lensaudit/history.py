@@ -508,7 +508,8 @@ class _Parsed:
 
 class _Auditor:
     """Parses file versions, then audits each distinct (model, coefficients,
-    crop factor, aspect ratio, focal) once, however many versions repeat it."""
+    crop factor, aspect ratio, focal, image circle) once, however many versions
+    repeat it."""
 
     def __init__(self) -> None:
         self.idents = _Interner()
@@ -522,10 +523,19 @@ class _Auditor:
         for entry in audited:
             identity = entry_identity(entry)
             idents.append(self.idents(identity))
-            # What the metrics depend on: model, coefficients, crop, aspect, focal.
+            # What the metrics depend on: model, coefficients, crop, aspect, focal
+            # and whether the image is a circle.
+            circular = metrics.is_circular_fisheye(entry.lens, entry.type)
             keys.append(
                 self.audit_keys(
-                    (entry.model, identity[5], entry.crop_factor, entry.aspect_ratio, entry.focal)
+                    (
+                        entry.model,
+                        identity[5],
+                        entry.crop_factor,
+                        entry.aspect_ratio,
+                        entry.focal,
+                        circular,
+                    )
                 )
             )
             rectilinear.append(entry.type == "rectilinear")
@@ -547,6 +557,7 @@ class _Auditor:
             aspect,
             focal,
             np.ones(size, dtype=bool),
+            np.array([k[5] for k in keys], dtype=bool),
         )
         finite = np.isfinite(result.r_max)
         folds = result.folds_in_image

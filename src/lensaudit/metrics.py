@@ -140,6 +140,32 @@ def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
         return np.hypot(np.maximum(aspect, 1.0 / aspect), 1.0)
 
 
+#: Radius of a circular fisheye's image circle in Hugin units: the circle
+#: inscribed in the frame's short side (r = 1), which the circle cannot exceed.
+IMAGE_CIRCLE = 1.0
+
+
+def is_circular_fisheye(lens: str, lens_type: str) -> bool:
+    """Whether the database says the lens draws an image circle inside the frame.
+
+    Lensfun has no element for it; it says so in the lens name ("Sigma 8mm
+    f/3.5 EX DG Circular", "... circular fisheye") of a non-rectilinear lens.
+    """
+    return lens_type != "rectilinear" and "circular" in lens.lower()
+
+
+def image_radius(aspect_ratio: ArrayLike, circular: ArrayLike | None = None) -> FloatArray:
+    """Radius of the image a model must not fold inside, in Hugin units.
+
+    The frame's corner, hypot(aspect, 1); for a circular fisheye, its image
+    circle, taken as the circle inscribed in the short side (r = 1).
+    """
+    corner = image_corner(aspect_ratio)
+    if circular is None:
+        return corner
+    return np.where(np.asarray(circular, dtype=bool), IMAGE_CIRCLE, corner)
+
+
 def paper_image_corner(crop_factor: ArrayLike, focal: ArrayLike) -> FloatArray:
     """The paper's Eq. 29: hypot(18, 12) / (crop * focal), in focal-length units."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -157,11 +183,14 @@ def compute(
     aspect_ratio: ArrayLike,
     focal: ArrayLike,
     audited: ArrayLike,
+    circular: ArrayLike | None = None,
 ) -> Metrics:
     """Metrics for entries given as columns; only ``audited`` entries are computed.
 
     ``model`` is "ptlens", "poly3" or "poly5" per entry; coefficients a, b, c
     (ptlens), k1 (poly3, poly5) and k2 (poly5) are raw Lensfun values.
+    ``circular`` marks circular fisheyes, judged against their image circle
+    (see :func:`image_radius`) rather than the frame's corner.
     """
     model = np.asarray(model)
     audited = np.asarray(audited, dtype=bool)
@@ -197,7 +226,7 @@ def compute(
                 r_max[row], d_max[row], tail[row] = _exact_model_r_max(
                     exact, 1 if name == "ptlens" else 2
                 )
-    r_corner = np.where(audited, image_corner(aspect_ratio), np.nan)
+    r_corner = np.where(audited, image_radius(aspect_ratio, circular), np.nan)
     r_corner_paper = np.where(audited, paper_image_corner(crop_factor, focal), np.nan)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         r_normalized = d_max / r_corner

@@ -260,6 +260,7 @@ def audit_entries(
         floats("aspect_ratio"),
         floats("focal"),
         audited,
+        [metrics.is_circular_fisheye(e.lens, e.type) for e in entries],
     )
     if source is None:
         source = database.DatabaseSource((), "entries given in memory")

@@ -70,7 +70,10 @@ def lines(audit: Audit) -> list[str]:
     out.append("")
 
     folding = summary.folding
-    out.append(f"Entries that fold inside their own image, D(r_max) < image corner: {len(folding)}")
+    out.append(
+        "Entries that fold inside their own image, D(r_max) < image corner "
+        f"(or circle, for circular fisheyes): {len(folding)}"
+    )
     if folding:
         entries = audit.entries
         m = audit.metrics

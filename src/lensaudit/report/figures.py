@@ -225,7 +225,7 @@ def curve_figure(curve: Curve, title: str) -> Figure:
         color=BLUE,
         linestyle="--",
         linewidth=1,
-        label=f"image corner, hypot(aspect, 1) = {curve.r_corner:.3f}",
+        label=f"image corner (circle of a circular fisheye) = {curve.r_corner:.3f}",
     )
     bottom.plot(curve.r, curve.slope, color="black", linewidth=1.5, label="D'(r)")
     bottom.axhline(0.0, color=GREY, linewidth=0.8)

@@ -444,8 +444,9 @@ def render(
 <p id="headline">{escape(head_line)}</p>
 <p class="note">A polynomial distortion D(r) = r F(r) is invertible only up to its first local
 maximum r_max. Radii are in Hugin units: 1 is half the short side of the calibration image,
-the image corner is at hypot(aspect, 1). An entry folds inside its image when
-r_normalized = D(r_max) / corner &lt; 1.</p>
+the image corner is at hypot(aspect, 1), and a circular fisheye's image circle at 1 (the circle
+inscribed in the short side). An entry folds inside its image when
+r_normalized = D(r_max) / corner (or circle) &lt; 1.</p>
 <section id="provenance-section"><h2>Provenance</h2>{_provenance(provenance)}</section>
 <section id="tables"><h2>Tables 1 and 2</h2>
 {_table(TABLE1_CAPTION, TABLE1_HEADER, table1, "table1")}
