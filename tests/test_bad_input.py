@@ -331,3 +331,17 @@ def test_every_command_names_a_too_long_path_in_one_line(tmp_path, command):
     name = str(tmp_path / ("y" * 300))
     extra = ["-o", str(tmp_path / "out")] if command in ("report", "history") else []
     assert_one_line_error(run_cli(command, name, *extra), "File name too long")
+
+
+@pytest.mark.parametrize(
+    "arguments, fragment",
+    [
+        (["scan", "-o", "{tmp}"], "is a directory"),
+        (["scan", "--format", "xml"], "'xml' is not one of"),
+        (["scna"], "No such command 'scna'"),
+        (["--bogus"], "No such option '--bogus'"),
+    ],
+)
+def test_bad_usage_is_one_line_and_exit_2(tmp_path, arguments, fragment):
+    arguments = [a.format(tmp=tmp_path) for a in arguments]
+    assert_one_line_error(run_cli(*arguments), fragment, "--help")

@@ -25,6 +25,17 @@ SUBCOMMANDS = {
 }
 
 
+# click 8.2 and newer show the help text through this error when no command is given.
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
+
+def _usage_error(ctx: click.Context, error: click.UsageError) -> None:
+    """Bad usage as one line, as every other bad input, with where to read more; exit 2."""
+    path = error.ctx.command_path if error.ctx is not None else ctx.command_path
+    click.echo(f"lensaudit: error: {error.format_message()} (see '{path} --help')", err=True)
+    ctx.exit(2)
+
+
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported on first use."""
 
@@ -41,11 +52,22 @@ class LazyGroup(click.Group):
         module = import_module(f"{__name__}.{SUBCOMMANDS[cmd_name][0]}")
         return getattr(module, cmd_name)
 
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        try:
+            return super().parse_args(ctx, args)
+        except click.UsageError as error:
+            if isinstance(error, _NO_ARGS_IS_HELP):  # the help text, as asked
+                raise
+            _usage_error(ctx, error)
+            raise  # not reached: _usage_error exits
+
     def invoke(self, ctx: click.Context):
         # The last line of defence: a file-system problem that a command did
         # not foresee (a path too long, a permission) is one line, not a traceback.
         try:
             return super().invoke(ctx)
+        except click.UsageError as error:
+            _usage_error(ctx, error)
         except OSError as error:
             if isinstance(error, BrokenPipeError):
                 raise
