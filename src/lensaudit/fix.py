@@ -124,37 +124,75 @@ class Change:
 
 
 def change_of_distortion(
-    model: str, old: Sequence[float], new: Sequence[float], aspect_ratio: float
+    model: str,
+    old: Sequence[float],
+    new: Sequence[float],
+    aspect_ratio: float,
+    image_radius: float | None = None,
 ) -> Change:
     """Maximum and RMS of |D_new - D_old| over the image, in pixels (6000x4000 frame).
 
-    The maximum is over radii 0 to r_corner = hypot(aspect, 1), found exactly
-    at the end points and the real roots of the difference's derivative. The
-    RMS is over the image's frame (aspect x 1 Hugin units, every pixel alike).
+    The image is the frame (aspect x 1 Hugin units) within ``image_radius``
+    of its centre: by default the corner, hypot(aspect, 1), so the whole
+    frame; a smaller radius (a circular fisheye's image circle) leaves out
+    the rest. The maximum is over radii 0 to that radius, found exactly at
+    the end points and the real roots of the difference's derivative; the
+    RMS is over the image's area, every pixel alike.
     """
     difference = P.polysub(distortion_polynomial(model, new), distortion_polynomial(model, old))
     difference = np.trim_zeros(difference, "b")
     aspect = max(aspect_ratio, 1.0 / aspect_ratio)
     r_corner = math.hypot(aspect, 1.0)
+    radius = r_corner if image_radius is None else min(image_radius, r_corner)
     if difference.size == 0:
         return Change(0.0, 0.0)
-    radii = [0.0, r_corner]
+    radii = [0.0, radius]
     if difference.size > 2:
         roots = P.polyroots(P.polyder(difference))
         radii += [
             root.real
             for root in roots
-            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < r_corner
+            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < radius
         ]
     largest = float(np.max(np.abs(P.polyval(np.array(radii), difference))))
     nodes, weights = np.polynomial.legendre.leggauss(_GAUSS_POINTS)
-    x = (nodes + 1) * aspect / 2
-    y = (nodes + 1) / 2
-    radius = np.hypot(x[:, None], y[None, :])
-    mean_square = float(
-        np.einsum("i,j,ij->", weights, weights, P.polyval(radius, difference) ** 2) / 4
-    )
+    if radius >= r_corner:
+        # The whole frame: a tensor Gauss-Legendre rule over a quarter of it.
+        x = (nodes + 1) * aspect / 2
+        y = (nodes + 1) / 2
+        squares = P.polyval(np.hypot(x[:, None], y[None, :]), difference) ** 2
+        mean_square = float(np.einsum("i,j,ij->", weights, weights, squares) / 4)
+    else:
+        mean_square = _mean_square_within(difference, aspect, radius, nodes, weights)
     return Change(largest * PIXELS_PER_UNIT, math.sqrt(mean_square) * PIXELS_PER_UNIT)
+
+
+def _mean_square_within(
+    difference: np.ndarray, aspect: float, radius: float, nodes: np.ndarray, weights: np.ndarray
+) -> float:
+    """Mean of difference(r)^2 over the quarter frame [0, aspect] x [0, 1] within ``radius``.
+
+    In polar form: the integral of f(r)^2 r theta(r) dr, with theta(r) the
+    angle of the circle of radius r inside the quarter frame. theta has
+    square-root kinks where the circle leaves the frame's sides (r = 1, r =
+    aspect); each piece is integrated with r = low + (high - low) u^2, which
+    smooths them for the Gauss-Legendre rule.
+    """
+    u = (nodes + 1) / 2
+    edges = sorted({0.0, *(e for e in (1.0, aspect) if e < radius), radius})
+    total = area = 0.0
+    for low, high in zip(edges, edges[1:], strict=False):
+        r = low + (high - low) * u**2
+        jacobian = 2 * (high - low) * u * weights / 2
+        with np.errstate(invalid="ignore"):
+            theta = np.where(
+                r <= 1, math.pi / 2, np.arcsin(np.minimum(1.0, 1.0 / np.maximum(r, 1e-300)))
+            )
+            theta = theta - np.where(r > aspect, np.arccos(np.minimum(1.0, aspect / r)), 0.0)
+        weight = r * theta * jacobian
+        total += float(np.sum(P.polyval(r, difference) ** 2 * weight))
+        area += float(np.sum(weight))
+    return total / area
 
 
 @dataclass(frozen=True)
@@ -176,13 +214,22 @@ class Goal:
 
 
 def goal_for(
-    aspect_ratio: float, margin: float = DEFAULT_MARGIN, target: float | None = None
+    aspect_ratio: float,
+    margin: float = DEFAULT_MARGIN,
+    target: float | None = None,
+    image_radius: float | None = None,
 ) -> Goal:
-    """The default goal for an image of the given aspect ratio.
+    """The goal for an image of the given aspect ratio.
 
-    The target defaults to r_corner x margin, and is never below r_corner.
+    ``image_radius`` is the radius of the image the model must not fold
+    inside (Hugin units), by default its corner hypot(aspect, 1); the goal's
+    ``r_corner`` is that radius. The target defaults to that radius times
+    the margin, and is never below it.
     """
-    r_corner = float(metrics.image_corner(aspect_ratio))
+    if image_radius is None:
+        r_corner = float(metrics.image_corner(aspect_ratio))
+    else:
+        r_corner = float(image_radius)
     if target is None:
         target = r_corner * max(margin, 1.0)
     return Goal(aspect_ratio, r_corner, float(target), r_corner * margin, margin)
@@ -510,6 +557,7 @@ def fix_entry(
     target: float | None = None,
     tolerance: float = DEFAULT_TOLERANCE_PX,
     texts: Mapping[str, str] | None = None,
+    image_radius: float | None = None,
 ) -> FixResult:
     """Refit one audited entry so that it no longer folds inside its image.
 
@@ -520,6 +568,8 @@ def fix_entry(
     pixels of a 6000x4000 frame, for the result to count as fixed.
     ``texts``: the coefficient attributes as written in the file (their
     decimals and style are kept); by default the shortest form of each value.
+    ``image_radius``: the radius of the image in Hugin units, as the audit's
+    ``r_corner`` column gives it; by default the corner hypot(aspect, 1).
     """
     if entry.status != STATUS_OK or entry.model not in MODEL_COEFFICIENTS:
         raise ValueError(f"{entry.file}:{entry.line}: entry was not audited ({entry.status})")
@@ -528,7 +578,7 @@ def fix_entry(
     if texts is None:
         texts = {name: repr(value) for name, value in zip(names, old, strict=True)}
     old_texts = tuple(texts.get(name) or "0" for name in names)
-    goal = goal_for(entry.aspect_ratio, margin, target)
+    goal = goal_for(entry.aspect_ratio, margin, target, image_radius)
     before = judge(entry.model, old, goal)
     common = dict(
         entry=entry,
@@ -563,7 +613,7 @@ def fix_entry(
         new_texts = [repr(v) for v in fit.coefficients]
         new = fit.coefficients
         after = judge(entry.model, new, goal)
-    change = change_of_distortion(entry.model, old, new, entry.aspect_ratio)
+    change = change_of_distortion(entry.model, old, new, entry.aspect_ratio, goal.r_corner)
     status, message = STATUS_FIXED, ""
     if change.max_px > tolerance:
         status = STATUS_BEYOND_TOLERANCE
@@ -571,7 +621,7 @@ def fix_entry(
             f"the closest {entry.model} curve without the fold changes D by up to "
             f"{change.max_px:.0f} px over the image, more than the {tolerance:g} px "
             f"tolerance ({FRAME} frame): the model folds at D = {before.d_max:.3g}, "
-            f"{before.r_normalized:.0%} of the corner radius {goal.r_corner:.3g}"
+            f"{before.r_normalized:.0%} of the image radius {goal.r_corner:.3g}"
         )
         if len(names) == 1:
             message += f"; {entry.model} has a single coefficient"
@@ -710,7 +760,12 @@ def fix_audit(
     for index in indices:
         texts = sources.texts(index) if sources is not None else None
         result = fix_entry(
-            audit.entries[index], margin=margin, target=target, tolerance=tolerance, texts=texts
+            audit.entries[index],
+            margin=margin,
+            target=target,
+            tolerance=tolerance,
+            texts=texts,
+            image_radius=float(audit.metrics.r_corner[index]),
         )
         result = replace(result, index=index)
         if sources is not None and index in sources.problems:
