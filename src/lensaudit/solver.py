@@ -27,16 +27,21 @@ answer proven before it is returned:
    (0, inf) exists exactly when c < 0; or when c > 0, some coefficient is
    negative and the discriminant is positive (three real roots, so Descartes'
    rule of signs counts the positive ones exactly); or for lower degrees, by
-   the same reasoning on the quadratic and linear cases. A repeated root
-   (zero discriminant) never crosses unless c < 0. The discriminant's sign is
+   the same reasoning on the quadratic and linear cases. With a repeated
+   root (zero discriminant), p crosses exactly when c < 0. The discriminant's sign is
    computed from the coefficients' mantissas and exponents, so that no term
    overflows or underflows, with a rounding-error bound; where the bound
    cannot tell, it is computed exactly in integers. The same signs tell which
    root is wanted (the first of one, two or three positive roots), and so
    give an exact test "is the root at most X" from the signs of p, p' and
-   p'' at X. Bisection over the bit patterns of positive doubles with that
-   test, the signs evaluated at X's own scale, brackets the root between two
-   adjacent doubles.
+   p'' at X, each evaluated at X's own scale (scaled so that the largest
+   term is about 1) with a rounding-error bound. Estimates of the root (the
+   fast path with its negligible coefficients dropped, and the roots of
+   a + b w + c w^2, which p approaches for w far beyond the fast path's
+   scale), polished by Newton's method at their own scale, are accepted
+   where the test proves the root within 64 doubles of them; otherwise
+   bisection over the bit patterns of positive doubles with the test
+   brackets the root between two adjacent doubles.
 3. Where a sign in step 2 is too close to call even with compensated
    arithmetic (tangencies and near-triple roots), or the discriminant is
    exactly zero, the same test runs in exact integer arithmetic on the
@@ -44,20 +49,25 @@ answer proven before it is returned:
 
 Accuracy: the finite/infinite decision is exact for all finite binary64
 inputs; the relative error is at most 2^-43 (about 1.1e-13) wherever the root
-is a normal double (usually under one unit in the last place). ``inf`` means
+is a normal double (usually a unit or so in the last place). ``inf`` means
 no sign change up to the largest double. A subnormal root comes back finite
-and positive, within one unit in its last place.
+and positive.
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from fractions import Fraction
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
+#: Mantissas and exponents of a, b, c, as numpy.frexp gives them.
+_Frexps = tuple[
+    FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32]
+]
 
 _EPS = np.finfo(np.float64).eps
 _SPLITTER = 134217729.0  # 2**27 + 1, for Veltkamp's split
@@ -378,9 +388,7 @@ def _classify(
     a: FloatArray,
     b: FloatArray,
     c: FloatArray,
-    frexps: tuple[
-        FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32]
-    ],
+    frexps: _Frexps,
 ) -> NDArray[np.int8]:
     """The kind of each cubic (see _INFINITE ... _UNDECIDED), from signs and discriminants."""
     ma, ea, mb, eb, mc, ec = frexps
@@ -478,9 +486,7 @@ def _at_scale(
 def _root_at_most(
     x: FloatArray,
     kind: NDArray[np.int8],
-    frexps: tuple[
-        FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32]
-    ],
+    frexps: _Frexps,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """(wanted root <= x, certain) for x > 0, from the signs of p, p' and p'' at x."""
     ma, ea, mb, eb, mc, ec = frexps
@@ -525,25 +531,128 @@ def _root_at_most(
     return at_most, certain
 
 
-def _bisect(
-    kind: NDArray[np.int8],
-    frexps: tuple[
-        FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32]
-    ],
-) -> tuple[FloatArray, NDArray[np.bool_]]:
+def _at_scale_cubic(x: FloatArray, frexps: _Frexps) -> tuple[FloatArray, list[FloatArray]]:
+    """(u, coefficients): p(x) = 2^E sum coefficients[k] u^(3-k), x = u 2^ex, u in [1/2, 1)."""
+    ma, ea, mb, eb, mc, ec = frexps
+    u, ex = np.frexp(x)
+    one = np.full_like(u, 0.5)
+    terms = [(mc, ec, 3), (mb, eb, 2), (ma, ea, 1), (one, np.ones_like(ex), 0)]
+    return u, _at_scale(ex, terms)
+
+
+def _newton_at_scale(x: FloatArray, frexps: _Frexps, steps: int) -> FloatArray:
+    """Plain Newton steps on p from x > 0, each at the scale of its iterate."""
+    for _ in range(steps):
+        u, (c3, c2, c1, c0) = _at_scale_cubic(x, frexps)
+        value = ((c3 * u + c2) * u + c1) * u + c0
+        slope = (3 * c3 * u + 2 * c2) * u + c1
+        moved = np.ldexp(u - value / slope, np.frexp(x)[1])
+        x = np.where(np.isfinite(moved) & (moved > 0), moved, x)
+    return x
+
+
+def _lower_cluster_roots(frexps: _Frexps) -> tuple[FloatArray, FloatArray]:
+    """Roots of a + b w + c w^2, NaN where not positive and finite.
+
+    Where the constant 1 of p is negligible (roots much larger than those of
+    the fast path's scale), these approximate the roots of p. Computed from
+    mantissas and exponents, scaled so that nothing overflows.
+    """
+    ma, ea, mb, eb, mc, ec = frexps
+    s = (ea - ec) // 2  # w = 2^s v balances a and c w^2
+    beta = np.ldexp(mb, eb + s - ea)
+    gamma = np.ldexp(mc, ec + 2 * s - ea)
+    disc = beta * beta - 4 * ma * gamma
+    q = -(beta + np.copysign(np.sqrt(disc), beta)) / 2
+    # b dominant (or a or c zero): one root near -a/b, one near -b/c.
+    apart = (np.abs(beta) > 2.0**500) | (ma == 0) | (mc == 0)
+    first = np.where(apart, np.ldexp(-ma / mb, ea - eb - s), ma / q)
+    second = np.where(apart, np.ldexp(-mb / mc, eb - ec - s), q / gamma)
+    roots = []
+    for v in (first, second):
+        w = np.ldexp(v, s)
+        roots.append(np.where(np.isfinite(w) & (w > 0), w, np.nan))
+    return roots[0], roots[1]
+
+
+def _certify_estimates(x: FloatArray, kind: NDArray[np.int8], frexps: _Frexps) -> NDArray[np.bool_]:
+    """True where the wanted root provably lies within 64 doubles either side of x > 0."""
+    bits = x.view(np.int64)
+    below = np.maximum(bits - 64, 1).view(np.float64)
+    above = np.minimum(bits + 64, _MAX_BITS).view(np.float64)
+    proven = np.isfinite(x) & (x > 0)
+    check = np.flatnonzero(proven)
+    parts = tuple(v[check] for v in frexps)
+    at_most, certain = _root_at_most(below[check], kind[check], parts)
+    proven[check] = ~at_most & certain
+    check = check[proven[check]]
+    parts = tuple(v[check] for v in frexps)
+    at_most, certain = _root_at_most(above[check], kind[check], parts)
+    proven[check] = at_most & certain
+    return proven
+
+
+_SEARCH_BEYOND, _SEARCH_ESTIMATE, _SEARCH_BISECT, _SEARCH_UNSURE = range(4)
+
+
+def _search(
+    a: FloatArray, b: FloatArray, c: FloatArray, kind: NDArray[np.int8], frexps: _Frexps
+) -> tuple[FloatArray, NDArray[np.int8]]:
+    """(roots, outcome) for cubics known to change sign somewhere on (0, inf).
+
+    Outcome _SEARCH_BEYOND: the root exceeds the largest double (inf).
+    Otherwise estimates (the fast path with negligible coefficients dropped,
+    and the roots of a + b w + c w^2), polished at their own scale, are
+    proven by the exact test a few doubles either side (_SEARCH_ESTIMATE);
+    the others are left to bisection (_SEARCH_BISECT), or to exact arithmetic
+    where the test at the largest double was too close to call.
+    """
+    size = a.size
+    result = np.full(size, np.inf)
+    at_max, certain = _root_at_most(np.full(size, _MAX), kind, frexps)
+    outcome = np.where(certain, _SEARCH_BEYOND, _SEARCH_UNSURE).astype(np.int8)
+    open_ = np.flatnonzero(certain & at_max)
+    if open_.size == 0:
+        return result, outcome
+    outcome[open_] = _SEARCH_BISECT
+
+    ao, bo, co = a[open_], b[open_], c[open_]
+    parts = tuple(v[open_] for v in frexps)
+    largest = np.maximum(np.abs(ao), np.maximum(np.sqrt(np.abs(bo)), np.cbrt(np.abs(co))))
+    t = -np.frexp(largest)[1]
+    A, B, C = (
+        np.where(np.abs(v) >= _SAFE_SCALED, v, 0.0)
+        for v in (np.ldexp(ao, t), np.ldexp(bo, 2 * t), np.ldexp(co, 3 * t))
+    )
+    x = _min_root_scaled(A, B, C)
+    top = np.where(x > 0, np.ldexp(1 / np.where(x > 0, x, 1.0), t), np.nan)
+    pending = np.arange(open_.size)
+    for estimate in (top, *_lower_cluster_roots(parts)):
+        usable = pending[np.isfinite(estimate[pending])]
+        if usable.size == 0:
+            continue
+        sub = tuple(v[usable] for v in parts)
+        polished = _newton_at_scale(estimate[usable], sub, 4)
+        proven = _certify_estimates(polished, kind[open_[usable]], sub)
+        result[open_[usable[proven]]] = polished[proven]
+        outcome[open_[usable[proven]]] = _SEARCH_ESTIMATE
+        pending = np.setdiff1d(pending, usable[proven], assume_unique=True)
+    return result, outcome
+
+
+def _bisect(kind: NDArray[np.int8], frexps: _Frexps) -> tuple[FloatArray, NDArray[np.bool_]]:
     """(root, found) by bisection over the bit patterns of positive doubles.
 
-    The root is the upper end of the final pair of adjacent doubles; ``inf``
-    where it exceeds the largest double. Not found where a sign was uncertain.
+    For roots known to lie at or below the largest double. The root is the
+    upper end of the final pair of adjacent doubles. Not found where a sign
+    was too close to call (the root is then the bracket's upper end so far).
     """
     size = kind.shape[0]
     result = np.full(size, np.inf)
     found = np.ones(size, dtype=bool)
-    at_max, certain = _root_at_most(np.full(size, _MAX), kind, frexps)
-    found &= certain
-    active = np.flatnonzero(certain & at_max)
-    lo = np.zeros(active.size, dtype=np.int64)  # the bits of 0.0, below the root
-    hi = np.full(active.size, _MAX_BITS, dtype=np.int64)  # at or above it
+    active = np.arange(size)
+    lo = np.zeros(size, dtype=np.int64)  # the bits of 0.0, below the root
+    hi = np.full(size, _MAX_BITS, dtype=np.int64)  # at or above it
     while active.size:
         middle = lo + (hi - lo) // 2
         parts = tuple(v[active] for v in frexps)
@@ -610,11 +719,11 @@ def _exact_at_most(P: tuple[int, int, int, int], kind: int, n: int, d: int) -> b
 
 
 def _float_bits(x: float) -> int:
-    return int(np.float64(x).view(np.int64))
+    return struct.unpack("<q", struct.pack("<d", x))[0]
 
 
 def _bits_float(bits: int) -> float:
-    return float(np.int64(bits).view(np.float64))
+    return struct.unpack("<d", struct.pack("<q", bits))[0]
 
 
 def _round_exact(root: Fraction) -> float:
@@ -680,8 +789,8 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
 # -- the solver ------------------------------------------------------------------------
 
 #: Names of the paths of :func:`min_positive_root_paths`, by code.
-PATHS = ("no sign change possible", "fast", "decided infinite", "bisection", "exact")
-_PATH_TRIVIAL, _PATH_FAST, _PATH_DECIDED, _PATH_BISECTION, _PATH_EXACT = range(5)
+PATHS = ("no coefficients", "fast", "decided infinite", "proven estimate", "bisection", "exact")
+_PATH_TRIVIAL, _PATH_FAST, _PATH_DECIDED, _PATH_ESTIMATE, _PATH_BISECTION, _PATH_EXACT = range(6)
 
 
 def _fast(
@@ -763,15 +872,27 @@ def _robust(
         part = slice(start, start + _CHUNK)
         kind[part] = _classify(a[part], b[part], c[part], tuple(v[part] for v in frexps))
     search = np.flatnonzero(kind > _INFINITE)
-    exact = list(np.flatnonzero(kind == _UNDECIDED))
-    path[search] = _PATH_BISECTION
+    exact = [np.flatnonzero(kind == _UNDECIDED)]
+    outcome = np.empty(search.size, dtype=np.int8)
     for start in range(0, search.size, _CHUNK):
         part = search[start : start + _CHUNK]
+        result[part], outcome[start : start + _CHUNK] = _search(
+            a[part], b[part], c[part], kind[part], tuple(v[part] for v in frexps)
+        )
+    path[search] = np.array(
+        [_PATH_DECIDED, _PATH_ESTIMATE, _PATH_BISECTION, _PATH_EXACT], dtype=np.int8
+    )[outcome]
+    exact.append(search[outcome == _SEARCH_UNSURE])
+    # Few are left to bisect: all at once, not per chunk.
+    bisect = search[outcome == _SEARCH_BISECT]
+    for start in range(0, bisect.size, _CHUNK):
+        part = bisect[start : start + _CHUNK]
         roots, found = _bisect(kind[part], tuple(v[part] for v in frexps))
         result[part] = roots
-        exact.extend(part[~found])
+        exact.append(part[~found])
         # Where bisection stopped, its bracket is the better start.
         estimates[part[~found]] = roots[~found]
+    exact = np.concatenate(exact)
     for i in exact:
         path[i] = _PATH_EXACT
         result[i] = _exact_min_positive_root(float(a[i]), float(b[i]), float(c[i]), estimates[i])
@@ -784,9 +905,10 @@ def min_positive_root_paths(
     """:func:`min_positive_root` over flat arrays, with the path each element took.
 
     Path codes index :data:`PATHS`: 0 all coefficients zero or not finite,
-    1 the certified fast path, 2 decided to have no sign change, 3 bisection
-    with floating-point signs, 4 exact integer arithmetic. For benchmarks and
-    tests of the solver itself.
+    1 the certified fast path, 2 decided to have no sign change, 3 an
+    estimate proven by the exact test, 4 bisection with floating-point
+    signs, 5 exact integer arithmetic. For benchmarks and tests of the solver
+    itself.
     """
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (a, b, c)))
     a, b, c = (np.ravel(v) for v in (a, b, c))
