@@ -536,3 +536,13 @@ def test_write_leaves_every_file_alone_when_one_changed_meanwhile(runner, tmp_pa
         == "lensaudit: error: b.xml: the file changed since it was read; nothing written\n"
     )
     assert first.read_text() == xml
+
+
+def test_a_fisheye_judged_against_the_frame_corner_is_told_about_image_circles(tmp_path):
+    xml = lens_xml(
+        '<distortion model="ptlens" focal="4.5" a="-0.21693" b="-0.44076" c="-0.47357"/>',
+        extra="<type>fisheye</type>",
+    )
+    _, result, _ = entry_from(xml, tmp_path)
+    assert result.status == fix.STATUS_BEYOND_TOLERANCE
+    assert "image circle" in result.message and "type fisheye" in result.message

@@ -7,11 +7,15 @@ the same model (ptlens a, b, c; poly3 k1; poly5 k1, k2), it finds those whose
 curve D(r) stays closest to the original over the image and that
 
 * are increasing (D' >= :data:`SLOPE_FLOOR`) up to the target radius, an
-  undistorted radius in Hugin units (by default the image corner times the
-  margin, and never less than the corner), so that r_max lies beyond it; and
+  undistorted radius in Hugin units (by default the image radius times the
+  margin, and never less than the image radius), so that r_max lies beyond
+  it; and
 * reach the distorted radius margin x r_corner while still increasing, so
   that d_max = D(r_max) is at least that: the entry no longer folds inside
   its image (r_normalized >= margin), which is what ``lensaudit scan`` flags.
+
+The image radius r_corner is the audit's: the frame's corner hypot(aspect,
+1), or a circular fisheye's image circle (see :mod:`lensaudit.metrics`).
 
 Both are needed: the Tokina 11-16 mm at 11 mm has r_max = 2.19, beyond its
 corner 1.80, yet folds inside its image because D only climbs to 1.69.
@@ -36,7 +40,8 @@ broke them. For an infinite target, D' >= SLOPE_FLOOR is imposed on all of
 Units. Radii are Hugin units (r = 1 is half the short side of the image).
 Changes of D are reported in pixels of a 6000 x 4000 frame, where that half
 short side is :data:`PIXELS_PER_UNIT` = 2000 px: the maximum over radii 0 to
-r_corner, and the root mean square over the image's own frame (aspect x 1).
+r_corner, and the root mean square over the image (its own frame, aspect x
+1, within r_corner).
 """
 
 from __future__ import annotations
@@ -562,7 +567,7 @@ def fix_entry(
     """Refit one audited entry so that it no longer folds inside its image.
 
     ``margin``: the r_normalized the new model must reach (1: the image
-    corner). ``target``: undistorted radius (Hugin units, may be ``inf``) up
+    radius). ``target``: undistorted radius (Hugin units, may be ``inf``) up
     to which the new model must increase; by default r_corner x margin, at
     least r_corner. ``tolerance``: largest change of D over the image, in
     pixels of a 6000x4000 frame, for the result to count as fixed.
@@ -625,9 +630,10 @@ def fix_entry(
         )
         if len(names) == 1:
             message += f"; {entry.model} has a single coefficient"
-        if entry.type not in ("rectilinear", ""):
-            # A circular fisheye's picture ends at its image circle, short of
-            # the frame's corner that the fold is measured against.
+        frame_corner = float(metrics.image_corner(entry.aspect_ratio))
+        if entry.type not in ("rectilinear", "") and goal.r_corner >= frame_corner:
+            # Judged against the frame's corner: a fisheye's picture may end
+            # at an image circle short of it (one its name does not announce).
             message += (
                 f"; the lens is of type {entry.type}: if its image circle ends inside "
                 "the frame, the fold may lie outside the picture"

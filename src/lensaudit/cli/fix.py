@@ -37,7 +37,7 @@ FORMAT_NAMES = ("table", "csv", "json")
     default=None,
     help="Undistorted radius, Hugin units, up to which the fixed model must "
     "increase (r_max beyond it); inf: a model that never folds. "
-    "[default: image corner times the margin, at least the corner]",
+    "[default: image radius times the margin, at least the image radius]",
 )
 @click.option(
     "--margin",
@@ -46,7 +46,7 @@ FORMAT_NAMES = ("table", "csv", "json")
     default=1.0,
     show_default=True,
     help="Fix entries with r_normalized < M; the fixed model reaches M times "
-    "the image corner before it folds.",
+    "the image radius before it folds.",
 )
 @click.option(
     "--tolerance",
@@ -96,15 +96,16 @@ def fix(
     entries `lensaudit scan` lists as folding inside their own image), find
     the coefficients of the same model (ptlens a, b, c; poly3 k1; poly5 k1,
     k2) whose D(r) stays closest to the original over the image and that
-    increase up to the target radius and reach margin x the image corner
-    before folding. The fit is a linear program (minimax over radii 0 to the
-    corner); the result is verified with the exact r_max solver, and the
-    coefficients are rounded to the decimals the file uses (at least 5
-    significant digits).
+    increase up to the target radius and reach margin x the image radius
+    before folding. The image radius is scan's: the frame's corner
+    hypot(aspect, 1), or a circular fisheye's image circle. The fit is a
+    linear program (minimax over radii 0 to the image radius); the result is
+    verified with the exact r_max solver, and the coefficients are rounded to
+    the decimals the file uses (at least 5 significant digits).
 
     Changes of D are in pixels of a 6000x4000 frame: Hugin r = 1, half the
-    short side, is 2000 px: the largest change over radii 0 to the corner,
-    and the RMS over the image. An entry counts as fixed when the largest
+    short side, is 2000 px: the largest change over radii 0 to the image
+    radius, and the RMS over the image. An entry counts as fixed when the largest
     change is within --tolerance; the others are reported with the reason.
 
     PATH is a database directory or XML files; without PATH, the database
@@ -184,7 +185,7 @@ def _check_options(target: float | None, margin: float, tolerance: float) -> Non
     if target is not None and not target > 0:
         fail(f"--target {target:g}: expected a radius > 0 in Hugin units (or inf)")
     if not (margin > 0 and math.isfinite(margin)):
-        fail(f"--margin {margin:g}: expected a finite number > 0 (1: the image corner)")
+        fail(f"--margin {margin:g}: expected a finite number > 0 (1: the image radius)")
     if not tolerance >= 0:
         fail(f"--tolerance {tolerance:g}: expected pixels >= 0")
 
@@ -223,14 +224,14 @@ def _write_table(
     chosen = " matching the filters" if settings["lens"] or settings["focal"] else ""
     lines.append(
         f"{len(results)} entr{'y' if len(results) == 1 else 'ies'}{chosen} with "
-        f"r_normalized < {margin:g} (D(r_max) below {margin:g} x the image corner)"
+        f"r_normalized < {margin:g} (D(r_max) below {margin:g} x the image radius)"
     )
     if not results:
         stream.write("\n".join(lines) + "\n")
         return
     lines.append(
         f"Changes of D in pixels of a {FRAME} frame ({PIXELS_PER_UNIT:g} px = half the "
-        "short side = Hugin r 1); maximum over radii 0 to the corner, RMS over the image."
+        "short side = Hugin r 1); maximum over radii 0 to the image radius, RMS over the image."
     )
     lines.append("")
     lines += text_table(
