@@ -812,6 +812,15 @@ def _fast(
     )
     roots = np.full(a.shape, np.nan)
     is_proven = np.zeros(a.shape, dtype=bool)
+    # Linear (Lensfun's poly3): one division rounds -1/a correctly. A result of
+    # exactly the largest double may stand for a root just beyond it: not proven.
+    linear = (b == 0) & (c == 0)
+    if linear.any():
+        w = np.where(a < 0, -1 / a, np.inf)
+        done = linear & ((w < _MAX) | (a >= 0))
+        roots[done] = w[done]
+        is_proven[done] = True
+        safe &= ~done
     if safe.all():  # the usual case: no gathering needed
         fast = np.arange(a.size)
     else:
