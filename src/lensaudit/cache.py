@@ -38,17 +38,20 @@ object per value until the entries are built, and it cannot run code.
 
 from __future__ import annotations
 
-import hashlib
 import marshal
 import os
 import stat as stat_module
-import tempfile
 import time
 from array import array
 from dataclasses import fields
 from itertools import islice
 from operator import attrgetter
 from pathlib import Path
+
+try:  # BLAKE2 alone: hashlib would also load OpenSSL, a few ms a warm scan does not need
+    from _blake2 import blake2b
+except ImportError:
+    from hashlib import blake2b
 
 from . import __version__
 from .loader import DistortionEntry, read_bytes
@@ -87,7 +90,7 @@ def _code_digest() -> str:
     All of them, not a chosen few: a module the loader or the metrics start
     to rely on must not be forgotten here.
     """
-    digest = hashlib.blake2b(digest_size=16)
+    digest = blake2b(digest_size=16)
     for module in sorted(Path(__file__).parent.glob("*.py")):
         try:
             digest.update(module.name.encode() + b"\0" + module.read_bytes())
@@ -105,14 +108,14 @@ _FORMAT = (
 
 
 def _checksum(body: bytes) -> bytes:
-    digest = hashlib.blake2b(_FORMAT, digest_size=_CHECKSUM_SIZE)
+    digest = blake2b(_FORMAT, digest_size=_CHECKSUM_SIZE)
     digest.update(body)
     return digest.digest()
 
 
 def content_digest(data: bytes) -> bytes:
     """The digest a file's bytes are cached under (BLAKE2b, 16 bytes)."""
-    return hashlib.blake2b(data, digest_size=_DIGEST_SIZE).digest()
+    return blake2b(data, digest_size=_DIGEST_SIZE).digest()
 
 
 def _join(values: list[str]) -> str | list[str]:
@@ -310,7 +313,7 @@ class ParseCache:
         try:
             # os.fsencode keeps file names that are not UTF-8 (surrogate escapes) as bytes.
             key = b"\0".join(sorted(os.fsencode(p.resolve()) for p in paths))
-            name = hashlib.blake2b(key, digest_size=8).hexdigest()
+            name = blake2b(key, digest_size=8).hexdigest()
             self.path = (directory or cache_dir()) / f"{_PREFIX}{name}{_SUFFIX}"
         except (OSError, RuntimeError, ValueError):
             return
@@ -417,6 +420,8 @@ class ParseCache:
         if self.path is None or not (self._changed or stale):
             return
         kept = {k: v for k, v in self._records.items() if k in self._seen}
+        import tempfile  # only here: a warm scan writes nothing
+
         temporary = None
         try:
             body = marshal.dumps(kept)
