@@ -133,6 +133,17 @@ def test_a_root_beyond_the_largest_double_is_infinite():
     assert solve_quietly(-1e-320, 0.0, 0.0) == math.inf
 
 
+@pytest.mark.parametrize("steps", range(-3, 4))
+def test_roots_next_to_the_largest_double_are_decided_exactly(steps):
+    # 1 + a w with a within a few doubles of -1 / 1.8e308: the root 1/|a| lies
+    # just below or just beyond the largest double.
+    a = -1 / 1.7976931348623157e308
+    for _ in range(abs(steps)):
+        a = math.nextafter(a, 0.0 if steps > 0 else -1.0)
+    check_against_exact(a, 0.0, 0.0)
+    check_against_exact(a, 0.0, 1e-320)
+
+
 def test_a_subnormal_root_is_finite_and_positive():
     root = solve_quietly(-1.7e308, 0.0, 0.0)  # 1 / 1.7e308, below the smallest normal
     assert 0 < root < 2.0**-1022
