@@ -432,7 +432,7 @@ def _classify(
     return kind
 
 
-# -- robust bisection ----------------------------------------------------------------
+# -- signs at any scale: estimates proven, and bisection ---------------------------
 
 
 def _horner_signs(
@@ -796,7 +796,7 @@ _PATH_TRIVIAL, _PATH_FAST, _PATH_DECIDED, _PATH_ESTIMATE, _PATH_BISECTION, _PATH
 def _fast(
     a: FloatArray, b: FloatArray, c: FloatArray
 ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
-    """(roots, proven, estimates): the fast path, for finite coefficients not all zero.
+    """(roots, proven, estimates): the fast path, for finite coefficients.
 
     Where not proven, the root is unknown; the estimate is the fast path's
     unproven root (NaN if it found none), a start for the exact search.
