@@ -385,6 +385,7 @@ def test_a_directory_in_place_of_the_cache_file_only_costs_speed(small_db, cache
     assert snapshot(run(small_db, cache=True)) == uncached
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes on this system")
 def test_a_fifo_in_place_of_the_cache_file_does_not_hang(small_db, cache_dir_path):
     uncached = snapshot(run(small_db, cache=False))
     path, _ = primed_cache(small_db, cache_dir_path)
@@ -407,17 +408,24 @@ def test_an_unwritable_cache_directory_only_costs_speed(write_xml, tmp_path, mon
 
 @pytest.mark.skipif(sys.platform == "win32", reason="file size limits are POSIX")
 def test_a_full_disk_only_costs_speed(small_db, cache_dir_path):
-    import resource
-
-    def small_files_only() -> None:  # writes beyond 100 bytes fail, as on a full disk
-        resource.setrlimit(resource.RLIMIT_FSIZE, (100, 100))
-
-    command = [sys.executable, "-m", "lensaudit", "scan", str(small_db), "--format", "csv"]
+    # Writes beyond 100 bytes fail (EFBIG), as they would on a full disk.
+    limited = (
+        "import resource, runpy, sys\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (100, 100))\n"
+        "sys.argv[0] = 'lensaudit'\n"
+        "runpy.run_module('lensaudit', run_name='__main__')\n"
+    )
+    arguments = ["scan", str(small_db), "--format", "csv"]
     env = dict(os.environ, LENSAUDIT_CACHE_DIR=str(cache_dir_path))
     full = subprocess.run(
-        command, env=env, capture_output=True, text=True, preexec_fn=small_files_only
+        [sys.executable, "-c", limited, *arguments], env=env, capture_output=True, text=True
     )
-    uncached = subprocess.run(command + ["--no-cache"], env=env, capture_output=True, text=True)
+    uncached = subprocess.run(
+        [sys.executable, "-m", "lensaudit", *arguments, "--no-cache"],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     assert (full.returncode, full.stderr, full.stdout) == (0, "", uncached.stdout)
     assert list(cache_dir_path.iterdir()) == []  # no partial or temporary file left
 
