@@ -112,6 +112,23 @@ def test_a_known_duplicate_focal_stays_known_when_its_lens_is_renamed(tmp_path):
     assert new(result) == [] and result.resolved == 0
 
 
+def test_editing_one_entry_of_a_known_duplicate_focal_keeps_the_duplicate_known(tmp_path):
+    before = xml(lens("Lens B", FINE, FINE.replace("0.01", "0.02")))
+    after = xml(lens("Lens B", FINE, FINE.replace("0.01", "0.03")))
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert [(f.code, f.known) for f in result.findings] == [("duplicate-focal", True)]
+
+
+def test_editing_a_known_duplicate_lens_keeps_the_duplicate_known(tmp_path):
+    before = xml(lens("Lens A", FINE), lens("Lens A", FOLDING.replace("-0.3", "0.02")))
+    after = xml(
+        lens("Lens A", FINE).replace("</mount>", "</mount><aspect-ratio>4:3</aspect-ratio>"),
+        lens("Lens A", FOLDING.replace("-0.3", "0.02")),
+    )
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert [(f.code, f.known) for f in result.findings] == [("duplicate-lens", True)]
+
+
 def test_a_third_definition_of_a_known_duplicate_lens_is_new_at_the_third(tmp_path):
     first, second = lens("Lens A", FINE), lens("Lens A", FINE, mount="Other")
     third = lens("Lens A", FINE, mount="Third")

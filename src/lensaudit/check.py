@@ -24,15 +24,17 @@ sentence. Errors make the check fail; warnings and notices do not.
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
 tree is never touched), a finding is new only when the baseline has no
-finding with the same severity, code and identity; the others are ``known``
-and never fail the check. Identity is content, never position: an entry is
-its lens (maker and model, compared ignoring case and all white space) and
-its own values (model, focal length, crop factor, aspect ratio, type,
-coefficients); a duplicate is the entry or lens that repeats, with its
-content; a file-level finding is the file's name and the problem. Findings
-that the baseline matches by identity are known first; the rest may still
-match a baseline finding by content alone, so that renaming a lens does not
-make its findings new, while a copy of a known entry under a new lens is new.
+finding of the same severity and code with the same identity; the others are
+``known`` and never fail the check. Identity is content, never position or
+line: an entry is its lens (maker and model, compared ignoring case and all
+white space) and its own values (model, focal length, crop factor, aspect
+ratio, type, coefficients); a duplicate is its lens or calibration and the
+pair it is made of; a file-level finding is the file's name and the problem.
+What the baseline does not match exactly may still match less specifically:
+an entry by its values alone (its lens was renamed), a duplicate by its lens
+and focal length alone (one of the pair was edited). Each baseline finding
+matches one finding only, so that a copy of a known entry under a new lens,
+or a third definition of a known duplicate lens, is new.
 
 A baseline file that cannot be parsed is replaced by its last readable
 version in the git history (among the last :data:`HISTORY_DEPTH` commits that
@@ -57,6 +59,7 @@ import numpy as np
 
 from . import database, loader
 from .loader import LoadError
+from .metrics import is_circular_fisheye
 
 SEVERITY_ERROR = "error"
 SEVERITY_WARNING = "warning"
@@ -241,14 +244,13 @@ class Source:
 class Identified(NamedTuple):
     """A finding with what matches it against a baseline's findings.
 
-    ``identity`` and ``content`` start with the severity and the code;
-    ``content`` leaves out the names of lenses. ``names`` are the names of
-    the files the finding is about (its own first).
+    ``keys`` are its identities from the most to the least specific, each
+    starting with the severity and the code (see :func:`_compare`).
+    ``names`` are the names of the files the finding is about, its own first.
     """
 
     finding: Finding
-    identity: Hashable
-    content: Hashable
+    keys: tuple[Hashable, ...]
     names: tuple[str, ...]
 
 
@@ -717,8 +719,9 @@ def _analyse(
             if finding is None:
                 continue
         content = (finding.severity, finding.code, _entry_content(entry))
-        identity = (*content, _lens_identity(entry.maker, entry.lens))
-        add(index, Identified(finding, identity, content, (read[index].source.file_name,)))
+        # The lens by name first; then by content alone, for a renamed lens.
+        keys = ((*content, _lens_identity(entry.maker, entry.lens)), content)
+        add(index, Identified(finding, keys, (read[index].source.file_name,)))
 
     for index, item in _duplicate_focals(read):
         add(index, item)
@@ -733,7 +736,7 @@ def _file_identified(file: _File) -> Identified:
     problem = file.problem
     assert problem is not None
     identity = (problem.severity, problem.code, file.source.file_name, file.problem_text)
-    return Identified(problem, identity, identity, (file.source.file_name,))
+    return Identified(problem, (identity,), (file.source.file_name,))
 
 
 def entry_key(entry: loader.DistortionEntry) -> tuple:
@@ -886,9 +889,10 @@ def _fold_finding(
             entry,
             "D(r) decreases from the image centre (D'(0) <= 0): the model folds back at once",
         )
+    image = "image circle" if is_circular_fisheye(entry.lens, entry.type) else "image corner"
     where = (
         f"D(r) peaks at D(r_max) = {m.d_max:.4g} for r_max = {m.r_max:.4g}, "
-        f"{m.r_normalized:.3f} times the image corner {m.r_corner:.4g} (Hugin units)"
+        f"{m.r_normalized:.3f} times the {image} {m.r_corner:.4g} (Hugin units)"
     )
     if m.r_normalized < 1:
         return _entry_finding(
@@ -958,11 +962,14 @@ def _duplicate_focals(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]
                 _entry_finding(severity, DUPLICATE_FOCAL, entry, text),
                 related=((file.source.display, first_line),),
             )
-            # Either entry may come first after a reordering: the pair is the identity.
-            pair = tuple(sorted((content, first_content), key=repr))
-            identity = (severity, DUPLICATE_FOCAL, _lens_identity(entry.maker, entry.lens), pair)
-            content_key = (severity, DUPLICATE_FOCAL, content)
-            yield index, Identified(finding, identity, content_key, (file.source.file_name,))
+            # The pair, in either order (a reordering may swap which comes
+            # first), of the lens by name; then the focal length of the lens,
+            # when one of the pair was edited; then the pair alone, when the
+            # lens was renamed.
+            pair = (severity, DUPLICATE_FOCAL, *sorted((content, first_content), key=repr))
+            lens_name = _lens_identity(entry.maker, entry.lens)
+            keys = ((*pair, lens_name), (*pair[:2], lens_name, *calibration[1:]), pair)
+            yield index, Identified(finding, keys, (file.source.file_name,))
 
 
 def _normalized_name(text: str) -> str:
@@ -1020,11 +1027,12 @@ def _duplicate_lenses(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]
                 _clip_key((lens.maker, lens.model, lens.crop_factor)),
                 related=((earlier_file.source.display, earlier.line),),
             )
-            pair = tuple(sorted((content, content_of(earlier)), key=repr))
-            identity = (severity, DUPLICATE_LENS, key, pair)
-            content_key = (severity, DUPLICATE_LENS, lens.crop_factor, content)
+            # The pair of lenses, in either order; then the name alone, when
+            # one of the pair was edited.
+            pair = sorted((content, content_of(earlier)), key=repr)
+            keys = ((severity, DUPLICATE_LENS, key, *pair), (severity, DUPLICATE_LENS, key))
             names = (file.source.file_name, earlier_file.source.file_name)
-            yield index, Identified(finding, identity, content_key, names)
+            yield index, Identified(finding, keys, names)
 
 
 # ---------------------------------------------------------------------------
@@ -1067,31 +1075,27 @@ def _compare(
     """The current findings with those the baseline has marked known, and the
     number of the baseline's findings that are gone (resolved).
 
-    A finding is known when an unmatched baseline finding has its identity;
-    those left may still match one by content (a renamed lens). Findings in
-    a file whose baseline could not be read are known too, but for its own
-    file-level finding.
+    Matching goes from the most specific key to the least: first every
+    finding that has an unmatched baseline finding with its first key, then
+    those left by their second key, and so on; each baseline finding matches
+    once. Findings in a file whose baseline could not be read are known too,
+    but for its own file-level finding.
     """
-    by_identity: dict[Hashable, list[int]] = {}
-    by_content: dict[Hashable, list[int]] = {}
-    for position, item in enumerate(before):
-        by_identity.setdefault(item.identity, []).append(position)
-        by_content.setdefault(item.content, []).append(position)
     used = [False] * len(before)
-
-    def take(pool: dict[Hashable, list[int]], key: Hashable) -> bool:
-        candidates = pool.get(key)
-        while candidates:
-            position = candidates.pop(0)
-            if not used[position]:
-                used[position] = True
-                return True
-        return False
-
-    known = [take(by_identity, item.identity) for item in current]
-    for position, item in enumerate(current):
-        if not known[position]:
-            known[position] = take(by_content, item.content)
+    known = [False] * len(current)
+    tiers = max((len(item.keys) for item in (*current, *before)), default=0)
+    for tier in range(tiers):
+        pool: dict[Hashable, list[int]] = {}
+        for position, item in enumerate(before):
+            if not used[position] and tier < len(item.keys):
+                pool.setdefault(item.keys[tier], []).append(position)
+        for position, item in enumerate(current):
+            if known[position] or tier >= len(item.keys):
+                continue
+            candidates = pool.get(item.keys[tier])
+            if candidates:
+                used[candidates.pop(0)] = True
+                known[position] = True
     for position, item in enumerate(current):
         if item.finding.code not in FILE_CODES and incomparable.intersection(item.names):
             known[position] = True
