@@ -398,6 +398,23 @@ def test_a_fifo_in_place_of_the_cache_file_does_not_hang(small_db, cache_dir_pat
     assert not worker.is_alive() and snapshot(outcome[0]) == uncached
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes on this system")
+def test_a_cached_file_replaced_by_a_fifo_does_not_hang(write_xml):
+    path = write_xml(lens_xml(POLY3.format(k1="-0.1")))
+    run(path.parent, cache=True)
+    path.unlink()
+    os.mkfifo(path)
+    outcome = []
+    worker = threading.Thread(
+        target=lambda: outcome.append(run(path.parent, cache=True)), daemon=True
+    )
+    worker.start()
+    worker.join(timeout=30)
+    assert not worker.is_alive()
+    assert snapshot(outcome[0]) == snapshot(run(path.parent, cache=False))
+    assert outcome[0].column("status") == ["unreadable"]
+
+
 def test_an_unwritable_cache_directory_only_costs_speed(write_xml, tmp_path, monkeypatch):
     blocker = tmp_path / "not-a-directory"
     blocker.write_text("")

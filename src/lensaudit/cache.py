@@ -54,7 +54,7 @@ except ImportError:
     from hashlib import blake2b
 
 from . import __version__
-from .loader import DistortionEntry, read_bytes
+from .loader import DistortionEntry, read_bytes, read_file
 from .pipeline import METRIC_FLOAT_COLUMNS
 
 #: Cache files kept in the cache directory, at most (least recently used go first).
@@ -327,15 +327,16 @@ class ParseCache:
     def get(self, path: Path, stat: os.stat_result, name: str) -> CachedFile:
         """Entries and file error of the file at absolute ``path``, reported as ``name``.
 
-        The file is read and hashed; if its content is not the stored one, it
-        is parsed here from those bytes and stored. Raises OSError when the
-        file cannot be read, as reading it without the cache would. ``stat``
-        is not used: a file's size and time do not prove it unchanged.
+        The file is read (as :func:`lensaudit.loader.read_file` reads it) and
+        hashed; if its content is not the stored one, it is parsed here from
+        those bytes and stored. Raises OSError when the file cannot be read,
+        as reading it without the cache would. ``stat`` is not used: a file's
+        size and time do not prove it unchanged.
         """
         key = os.fsencode(path)
         self._seen.add(key)
         try:
-            data = path.read_bytes()
+            data = read_file(path)
         except OSError:
             self._forget(key)
             raise
@@ -381,7 +382,7 @@ class ParseCache:
                 record = self._records.get(key)
                 if record is None or record[3] is None:
                     return None
-                if content_digest(path.read_bytes()) != record[0]:
+                if content_digest(read_file(path)) != record[0]:
                     return None
                 found.append((_unpack(record[1], name), record[2]))
             except (OSError, RuntimeError, *_RECORD_ERRORS):
