@@ -9,6 +9,7 @@ import click
 from .options import database_paths, fail, output_file, output_stream
 
 FORMAT_NAMES = ("table", "csv", "json")
+KIND_NAMES = ("distortion", "vignetting", "tca")
 
 
 @click.command()
@@ -22,6 +23,15 @@ FORMAT_NAMES = ("table", "csv", "json")
     show_default=True,
     help="table: readable summary; csv, json: every entry with its metrics.",
 )
+@click.option(
+    "-k",
+    "--kind",
+    type=click.Choice(KIND_NAMES),
+    default="distortion",
+    show_default=True,
+    help="Which models to audit: distortion (r_max), vignetting (where the correction "
+    "divides by zero) or tca (where a colour channel folds).",
+)
 @output_file
 @click.option(
     "--cache/--no-cache",
@@ -30,7 +40,9 @@ FORMAT_NAMES = ("table", "csv", "json")
     help="Reuse files parsed by an earlier run when unchanged (size and time); "
     "the cache is in $LENSAUDIT_CACHE_DIR or ~/.cache/lensaudit.",
 )
-def scan(paths: tuple[Path, ...], output_format: str, output: Path | None, cache: bool) -> None:
+def scan(
+    paths: tuple[Path, ...], output_format: str, kind: str, output: Path | None, cache: bool
+) -> None:
     """Compute r_max for every distortion entry of a Lensfun database.
 
     PATH is a database directory (every *.xml in it) or XML files. Without
@@ -44,9 +56,36 @@ def scan(paths: tuple[Path, ...], output_format: str, output: Path | None, cache
       r_normalized  d_max / image corner hypot(aspect, 1); below 1 the model
                     folds inside its own image
       *_paper       the same with the paper's mixed-unit corner (for comparison)
+
+    \b
+    --kind vignetting: C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6, r = 1 at half
+    the diagonal (the frame corner), per <vignetting> entry:
+      r_corner       image judged: 1, or a circular fisheye's circle
+      r_zero         first r where C changes sign (inf: never)
+      c_min, r_min   minimum of C over the image, and where
+      r_turn         first r where C' changes sign (inf: never)
+      zero_in_image  C <= 0 in the image: correction divides by zero (error)
+      low_in_image   C < 0.1 in the image: gain above 10 (warning)
+      monotone       no turning point inside the image (false: notice)
+
+    \b
+    --kind tca: r_d = r (b r^2 + c r + v) per channel, Hugin units, per
+    <tca> entry:
+      r_corner         image judged: hypot(aspect, 1), or 1 (circular fisheye)
+      r_fold_red/blue  first local maximum of r_d (inf: never)
+      folds_in_image   a channel folds inside the image (error)
+
+    Every kind has file, line, the lens, the model as written, severity
+    (vignetting, tca), status and message; see docs/vignetting.md. The
+    cache serves distortion only.
     """
-    from ..formats import writer
     from ..loader import LoadError
+
+    if kind != "distortion":
+        _scan_calibrations(paths, output_format, kind, output)
+        return
+
+    from ..formats import writer
     from ..pipeline import run
 
     try:
@@ -57,3 +96,23 @@ def scan(paths: tuple[Path, ...], output_format: str, output: Path | None, cache
         fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
     with output_stream(output) as stream:
         writer(output_format)(audit, stream)
+
+
+def _scan_calibrations(
+    paths: tuple[Path, ...], output_format: str, kind: str, output: Path | None
+) -> None:
+    """``scan --kind vignetting|tca``: read the elements of that kind and audit them."""
+    from importlib import import_module
+
+    from ..calibrations import load
+    from ..loader import LoadError
+
+    try:
+        source, loaded = load(list(paths) or None)
+    except LoadError as error:
+        fail(str(error))
+    if loaded.files and all(f.error for f in loaded.files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in loaded.files))
+    audit = import_module(f"lensaudit.{kind}").from_load(loaded, source)
+    with output_stream(output) as stream:
+        audit.write(output_format, stream)

@@ -1,0 +1,830 @@
+"""Read Lensfun's ``<vignetting>`` and ``<tca>`` elements, and what both audits share.
+
+Every ``<vignetting>`` and every ``<tca>`` element of the input gives exactly
+one record, with the lens context the distortion loader gives a
+``<distortion>`` (maker, lens, type, crop factor and aspect ratio, with the
+overrides of ``<calibration>`` applied the same way), a ``status`` and a
+``message``, in the same vocabulary as :mod:`lensaudit.loader`. A file that
+cannot be read, is not well-formed or is not a database gives a record of
+its own in both lists, so that the vignetting and TCA audits each account
+for every file.
+
+Attribute defaults are liblensfun's (``libs/lensfun/database.cpp``, the
+``<tca>`` and ``<vignetting>`` branches of its XML parser): a missing TCA
+``vr``/``vb`` (``kr``/``kb`` for ``linear``) is 1 and the other
+coefficients 0; a missing vignetting ``k1``/``k2``/``k3`` is 0. liblensfun
+reads a missing ``focal``, ``aperture`` or ``distance`` as 0, which no
+calibration means; here such an entry is ``missing_attribute``.
+
+The second half of the module is the numerical kernel both audits share:
+where the derivative of a cubic changes sign, decided exactly on the
+binary64 inputs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from fractions import Fraction
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from . import loader
+from .loader import (
+    NAN,
+    STATUS_BAD_VALUE,
+    STATUS_MISSING_ATTRIBUTE,
+    STATUS_NO_LENS,
+    STATUS_NOT_DATABASE,
+    STATUS_OK,
+    STATUS_UNKNOWN_MODEL,
+    STATUS_UNREADABLE,
+    STATUS_XML_ERROR,
+    SourceFile,
+)
+
+if TYPE_CHECKING:
+    import numpy as np
+    from lxml import etree
+    from numpy.typing import NDArray
+
+VIGNETTING = "vignetting"
+TCA = "tca"
+KINDS = (VIGNETTING, TCA)
+
+
+@dataclass(slots=True)
+class VignettingEntry:
+    """One ``<vignetting>`` element: C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6.
+
+    r = 1 at half the diagonal of the calibration sensor (see
+    :mod:`lensaudit.vignetting`). ``focal`` in millimetres, ``aperture`` an
+    f-number, ``distance`` in metres, as Lensfun writes them. Coefficients
+    are NaN for entries that were not audited.
+    """
+
+    file: str
+    line: int
+    maker: str
+    lens: str
+    type: str
+    crop_factor: float
+    aspect_ratio: float
+    model: str
+    focal: float
+    aperture: float = NAN
+    distance: float = NAN
+    k1: float = NAN
+    k2: float = NAN
+    k3: float = NAN
+    status: str = STATUS_OK
+    message: str = ""
+
+
+@dataclass(slots=True)
+class TCAEntry:
+    """One ``<tca>`` element: per channel (red, blue), r_d = r (b r^2 + c r + v).
+
+    ``poly3`` fills ``vr vb cr cb br bb``; ``linear`` fills ``kr kb``
+    (r_d = k r); the other model's coefficients are NaN. r is in Hugin
+    units, 1 = half the short side (see :mod:`lensaudit.tca`).
+    """
+
+    file: str
+    line: int
+    maker: str
+    lens: str
+    type: str
+    crop_factor: float
+    aspect_ratio: float
+    model: str
+    focal: float
+    kr: float = NAN
+    kb: float = NAN
+    vr: float = NAN
+    vb: float = NAN
+    cr: float = NAN
+    cb: float = NAN
+    br: float = NAN
+    bb: float = NAN
+    status: str = STATUS_OK
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """How one element kind is read."""
+
+    tag: str
+    entry: type
+    # model -> coefficient attributes and their defaults
+    models: dict[str, dict[str, float]]
+    # attributes every entry must have, besides model=
+    required: tuple[str, ...]
+    # record fields between "focal" and "status", in order
+    fields: tuple[str, ...]
+
+
+SPECS = {
+    VIGNETTING: _Spec(
+        "vignetting",
+        VignettingEntry,
+        {"pa": {"k1": 0.0, "k2": 0.0, "k3": 0.0}},
+        ("focal", "aperture", "distance"),
+        ("aperture", "distance", "k1", "k2", "k3"),
+    ),
+    TCA: _Spec(
+        "tca",
+        TCAEntry,
+        {
+            "poly3": {"vr": 1.0, "vb": 1.0, "cr": 0.0, "cb": 0.0, "br": 0.0, "bb": 0.0},
+            "linear": {"kr": 1.0, "kb": 1.0},
+        },
+        ("focal",),
+        ("kr", "kb", "vr", "vb", "cr", "cb", "br", "bb"),
+    ),
+}
+#: Model names each kind can audit.
+MODELS = {kind: tuple(spec.models) for kind, spec in SPECS.items()}
+
+# When an entry has several problems, the status names the most basic one
+# (the distortion loader's order).
+_STATUS_PRIORITY = (
+    STATUS_NO_LENS,
+    STATUS_MISSING_ATTRIBUTE,
+    STATUS_UNKNOWN_MODEL,
+    STATUS_BAD_VALUE,
+)
+_POSITIVE = ("focal", "aperture", "distance")
+
+
+@dataclass(slots=True)
+class CalibrationLoad:
+    """Records of every file, per kind, and the files they came from."""
+
+    vignetting: list[VignettingEntry] = field(default_factory=list)
+    tca: list[TCAEntry] = field(default_factory=list)
+    files: list[SourceFile] = field(default_factory=list)
+
+    def entries(self, kind: str) -> list[Any]:
+        """The records of one kind (``vignetting`` or ``tca``)."""
+        return self.vignetting if kind == VIGNETTING else self.tca
+
+
+def _record(spec: _Spec, name: str, line: int, context: Any, model: str, values: dict) -> Any:
+    return spec.entry(
+        name,
+        line,
+        context.maker,
+        context.lens,
+        context.type,
+        context.crop_factor,
+        context.aspect_ratio,
+        model,
+        values.get("focal", NAN),
+        *(values.get(f, NAN) for f in spec.fields),
+    )
+
+
+def _entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any:
+    """The record of one element; the common case (plain numbers) takes a short path.
+
+    Anything else is examined in full by :func:`_checked_entry`.
+    """
+    get = element.get
+    model = get("model")
+    defaults = spec.models.get(model)  # type: ignore[arg-type]
+    if defaults is not None and not context.problem:
+        required = [get(n) for n in spec.required]
+        optional = [get(n) for n in defaults]
+        if None not in required:
+            texts = required + [t for t in optional if t is not None]
+            joined = "".join(texts)  # type: ignore[arg-type]
+            # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
+            if joined.isascii() and "_" not in joined:
+                try:
+                    numbers = list(map(float, texts))  # type: ignore[arg-type]
+                except ValueError:
+                    numbers = None
+                if numbers is not None:
+                    total = sum(numbers)
+                    count = len(required)
+                    if total - total == 0 and min(numbers[:count]) > 0:  # all finite
+                        values = dict(zip(spec.required, numbers, strict=False))
+                        given = iter(numbers[count:])
+                        for (attribute, default), text in zip(
+                            defaults.items(), optional, strict=True
+                        ):
+                            values[attribute] = default if text is None else next(given)
+                        return _record(spec, name, element.sourceline or 0, context, model, values)
+    return _checked_entry(spec, element, name, context)
+
+
+def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any:
+    """The record of one element, every problem noted."""
+    attributes = element.attrib
+    problems: list[tuple[str, str]] = []
+    model = (attributes.get("model") or "").strip()
+    if not model:
+        problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
+    values: dict[str, float] = {}
+    for attribute in spec.required:
+        values[attribute] = _number(attributes, attribute, None, problems)
+    for attribute in _POSITIVE:
+        value = values.get(attribute, NAN)
+        if value <= 0:
+            problems.append((STATUS_BAD_VALUE, f"{attribute}={value:g} is not positive"))
+    defaults = spec.models.get(model)
+    if defaults is not None:
+        for attribute, default in defaults.items():
+            values[attribute] = _number(attributes, attribute, default, problems)
+    elif model:
+        known = ", ".join(spec.models)
+        problems.append(
+            (
+                STATUS_UNKNOWN_MODEL,
+                f"model {loader._quoted(model)} is not one of {known}",
+            )
+        )
+    if context.problem:
+        problems.append((context.status, context.problem))
+    record = _record(spec, name, element.sourceline or 0, context, model, values)
+    if problems:
+        record.status = min((code for code, _ in problems), key=_STATUS_PRIORITY.index)
+        record.message = "; ".join(text for _, text in problems)
+    return record
+
+
+def _number(
+    attributes: Any, attribute: str, default: float | None, problems: list[tuple[str, str]]
+) -> float:
+    """Attribute value as a number; a problem is noted for a bad or missing one."""
+    text = attributes.get(attribute)
+    if text is None:
+        if default is None:
+            problems.append((STATUS_MISSING_ATTRIBUTE, f"missing {attribute}="))
+            return NAN
+        return default
+    try:
+        return loader.parse_number(text)
+    except ValueError as error:
+        problems.append((STATUS_BAD_VALUE, f"{attribute}={error}"))
+        return NAN
+
+
+def entries_from_tree(root: etree._Element, name: str) -> tuple[list[Any], list[Any]]:
+    """(vignetting, tca) records for the elements under ``root``, in document order."""
+    found: dict[str, list[Any]] = {VIGNETTING: [], TCA: []}
+    specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
+    lens = calibration = None
+    lens_context = context = loader._lens_context(None)
+    for element in root.iter("lens", "calibration", "vignetting", "tca"):
+        tag = element.tag
+        if tag == "lens":
+            lens, calibration = element, None
+            lens_context = loader._lens_context(lens)
+        elif tag == "calibration":
+            if element.getparent() is lens:
+                calibration = element
+                context = loader._calibration_context(calibration, lens_context)
+        else:
+            spec, out = specs[tag]
+            parent = element.getparent()
+            if parent is not calibration or lens is None or parent.getparent() is not lens:
+                # Outside <lens><calibration>: the context the distortion loader gives.
+                out.append(_entry(spec, element, name, loader._context_of(element)))
+            else:
+                out.append(_entry(spec, element, name, context))
+    return found[VIGNETTING], found[TCA]
+
+
+def _error_record(spec: _Spec, name: str, line: int, status: str, message: str) -> Any:
+    record = spec.entry(name, line, "", "", "", NAN, NAN, "", NAN)
+    record.status, record.message = status, message
+    return record
+
+
+def _marked(records: Iterable[Any], status: str, message: str) -> list[Any]:
+    """Records given a file-level status; their own problems are kept in front."""
+    return [
+        replace(r, status=status, message=f"{r.message}; {message}" if r.message else message)
+        for r in records
+    ]
+
+
+def read_bytes(data: bytes, name: str) -> tuple[list[VignettingEntry], list[TCAEntry], str]:
+    """(vignetting records, tca records, the file's error message or "") of one file.
+
+    A file that is not well-formed XML gives an ``xml_error`` record at the
+    error's line in both lists, then what libxml2's recovery mode can still
+    read, each marked ``xml_error``; a file whose root is not
+    ``<lensdatabase>`` gives a ``not_database`` record, then its elements,
+    each so marked.
+    """
+    from lxml import etree
+
+    try:
+        root = etree.fromstring(data, loader.make_parser())
+    except etree.XMLSyntaxError as error:
+        line, column, text = loader._syntax_error_position(error)
+        reason = f"line {line}, column {column}: {text}"
+        message = f"XML is not well-formed at {reason}"
+        salvaged = _salvage(data, name)
+        salvage_message = f"file is not well-formed XML ({reason}); entry read in recovery mode"
+        out = []
+        for kind, records in zip(KINDS, salvaged, strict=True):
+            head = _error_record(SPECS[kind], name, line, STATUS_XML_ERROR, message)
+            out.append([head, *_marked(records, STATUS_XML_ERROR, salvage_message)])
+        return out[0], out[1], message
+    if b"xmlns" in data:
+        loader._use_local_names(root)
+    if root.tag != loader.DATABASE_ROOT:
+        tag = root.tag if isinstance(root.tag, str) else "?"
+        if len(tag) > 40:
+            tag = tag[:40] + "..."
+        message = (
+            f"root element is <{tag}>, not <{loader.DATABASE_ROOT}>: not a Lensfun database file"
+        )
+        line = root.sourceline or 1
+        out = []
+        for kind, records in zip(KINDS, entries_from_tree(root, name), strict=True):
+            head = _error_record(SPECS[kind], name, line, STATUS_NOT_DATABASE, message)
+            out.append([head, *_marked(records, STATUS_NOT_DATABASE, message)])
+        return out[0], out[1], message
+    vignetting, tca = entries_from_tree(root, name)
+    return vignetting, tca, ""
+
+
+def _salvage(data: bytes, name: str) -> tuple[list[Any], list[Any]]:
+    """Records libxml2's recovery mode can still read from a broken file."""
+    from lxml import etree
+
+    parser = etree.XMLParser(
+        recover=True, resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+    )
+    try:
+        root = etree.fromstring(data, parser)
+    except etree.XMLSyntaxError:
+        return [], []
+    if root is None:
+        return [], []
+    return entries_from_tree(root, name)
+
+
+def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
+    """Read (path, display name) pairs, as :func:`lensaudit.loader.expand` gives them.
+
+    A file that cannot be read gives an ``unreadable`` record in both lists.
+    """
+    result = CalibrationLoad()
+    for path, name in targets:
+        path = Path(path).resolve()
+        try:
+            vignetting, tca, error = read_bytes(loader.read_file(path), name)
+        except OSError as os_error:
+            error = f"cannot read file: {os_error.strerror or os_error}"
+            vignetting = [_error_record(SPECS[VIGNETTING], name, 0, STATUS_UNREADABLE, error)]
+            tca = [_error_record(SPECS[TCA], name, 0, STATUS_UNREADABLE, error)]
+        result.vignetting.extend(vignetting)
+        result.tca.extend(tca)
+        result.files.append(SourceFile(name, path, len(vignetting) + len(tca), error))
+    return result
+
+
+def load(
+    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None,
+) -> tuple[Any, CalibrationLoad]:
+    """(database source, records) of database directories and/or XML files.
+
+    Without ``paths``, the database bundled with lensfunpy. Raises
+    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all.
+    """
+    from . import database
+
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    source = database.resolve(list(paths) if paths else None)
+    return source, load_files(loader.expand(source.paths))
+
+
+# ---------------------------------------------------------------------------
+# Shared numerics: where the derivative of a cubic changes sign.
+#
+# Both audits ask where q(x) = c1 + 2 c2 x + 3 c3 x^2, the derivative of
+# c0 + c1 x + c2 x^2 + c3 x^3, changes sign: vignetting for C(w) in w = r^2,
+# TCA for r_d(r) = v r + c r^2 + b r^3. The floating-point answer is taken
+# where it is far from every decision boundary; the rest is decided exactly
+# in rational arithmetic on the numbers as written (see as_written).
+# ---------------------------------------------------------------------------
+
+#: Relative margin within which a floating-point decision is redone exactly.
+#: The computed quantities are accurate to about 1e-7 relative in the worst
+#: case the float path accepts (a discriminant 1e-9 of its terms), so a
+#: margin of 1e-6 leaves room to spare.
+MARGIN = 1e-6
+#: Coefficients outside this magnitude (other than 0) go to the exact path, so
+#: that no square or product in the float path overflows or underflows.
+_SAFE_LOW, _SAFE_HIGH = 2.0**-300, 2.0**300
+
+
+def _safe(*values: NDArray[np.float64]) -> NDArray[np.bool_]:
+    import numpy as np
+
+    ok = np.ones(np.shape(values[0]), dtype=bool)
+    for value in values:
+        magnitude = np.abs(value)
+        ok &= np.isfinite(value) & (
+            (magnitude == 0) | ((magnitude > _SAFE_LOW) & (magnitude < _SAFE_HIGH))
+        )
+    return ok
+
+
+def turning_points(
+    c1: NDArray[np.float64], c2: NDArray[np.float64], c3: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The roots of c1 + 2 c2 x + 3 c3 x^2 where it changes sign, smaller first.
+
+    Returns (x_low, x_high, reliable): NaN where there is no such root (a
+    double root is not a sign change), both roots of the quadratic or the
+    one of the linear case. ``reliable`` is False where the float answer
+    may be wrong in kind (a discriminant within 1e-9 of its terms, an input
+    outside [2^-300, 2^300]); those need :func:`exact_turning_points`.
+    """
+    import numpy as np
+
+    c1, c2, c3 = (np.asarray(v, dtype=np.float64) for v in (c1, c2, c3))
+    low = np.full(c1.shape, np.nan)
+    high = np.full(c1.shape, np.nan)
+    reliable = _safe(c1, c2, c3)
+    with np.errstate(all="ignore"):
+        # Quarter discriminant of 3 c3 x^2 + 2 c2 x + c1.
+        square, product = c2 * c2, 3.0 * c1 * c3
+        discriminant = square - product
+        scale = square + np.abs(product)
+        quadratic = c3 != 0
+        reliable &= ~quadratic | (np.abs(discriminant) > 1e-9 * scale)
+        two = quadratic & (discriminant > 0)
+        root = np.sqrt(np.where(two, discriminant, 0.0))
+        # The stable pair: no subtraction of nearly equal numbers.
+        s = -(c2 + np.copysign(root, c2))
+        first = s / (3.0 * c3)
+        second = np.where(s != 0, c1 / s, 0.0)
+        low = np.where(two, np.minimum(first, second), low)
+        high = np.where(two, np.maximum(first, second), high)
+        linear = ~quadratic & (c2 != 0)
+        low = np.where(linear, -(c1 / c2) / 2.0, low)
+    return low, high, reliable
+
+
+def first_sign_change(
+    c1: NDArray[np.float64], c2: NDArray[np.float64], c3: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """(x, reliable): the smallest x > 0 where c1 + 2 c2 x + 3 c3 x^2 changes sign.
+
+    ``inf`` where there is none; see :func:`turning_points` for ``reliable``.
+    """
+    import numpy as np
+
+    low, high, reliable = turning_points(c1, c2, c3)
+    with np.errstate(invalid="ignore"):
+        x = np.where(low > 0, low, np.where(high > 0, high, np.inf))
+    return x, reliable
+
+
+def as_written(value: float) -> Fraction:
+    """A coefficient as the database writes it: the shortest decimal that reads
+    back as ``value`` (exact for every decimal of up to 15 significant digits).
+
+    Exact decisions are taken on these rather than on the binary64 values:
+    they differ in kind on real entries (k1 + 2 k2 + 3 k3 = 0 in decimal, and
+    -2^-60 in binary64, puts a turning point exactly at the frame corner or
+    just inside it).
+    """
+    return Fraction(repr(float(value)))
+
+
+def _sign(value: Fraction | int) -> int:
+    return (value > 0) - (value < 0)
+
+
+def sign_of_surd(u: Fraction, v: Fraction, d: Fraction) -> int:
+    """Sign of u + v sqrt(d) for d >= 0, exactly."""
+    su, sv = _sign(u), _sign(v) if d else 0
+    if sv == 0:
+        return su
+    if su == 0 or su == sv:
+        return sv
+    # Opposite signs: the larger square wins.
+    return su * _sign(u * u - v * v * d)
+
+
+def _sqrt_fraction(d: Fraction, bits: int = 160) -> Fraction:
+    """sqrt(d) to about 2^-bits relative (d >= 0), as a fraction."""
+    if d == 0:
+        return Fraction(0)
+    shift = 2 * bits
+    scaled = (d.numerator << shift) // d.denominator
+    return Fraction(math.isqrt(scaled), 1 << bits)
+
+
+@dataclass(frozen=True)
+class ExactTurn:
+    """A root x = (p + e sqrt(d)) / q of the derivative, exactly; e is -1, 0 or 1."""
+
+    p: Fraction
+    e: int
+    d: Fraction
+    q: Fraction
+
+    def sign_minus(self, bound: Fraction) -> int:
+        """Sign of x - bound."""
+        return sign_of_surd(self.p - bound * self.q, Fraction(self.e), self.d) * _sign(self.q)
+
+    def value(self) -> Fraction:
+        """x to about 160 bits."""
+        return (self.p + self.e * _sqrt_fraction(self.d)) / self.q
+
+
+def exact_turning_points(c1: float, c2: float, c3: float) -> list[ExactTurn]:
+    """The positive roots of c1 + 2 c2 x + 3 c3 x^2 where it changes sign, in order
+    (coefficients taken :func:`as_written`)."""
+    a1, a2, a3 = as_written(c1), as_written(c2), as_written(c3)
+    roots: list[ExactTurn] = []
+    if a3 == 0:
+        if a2 != 0:
+            roots.append(ExactTurn(-a1, 0, Fraction(0), 2 * a2))
+    else:
+        discriminant = a2 * a2 - 3 * a1 * a3
+        if discriminant > 0:
+            # Smaller root first: for a3 > 0 it takes -sqrt, for a3 < 0 +sqrt.
+            order = (-1, 1) if a3 > 0 else (1, -1)
+            roots = [ExactTurn(-a2, e, discriminant, 3 * a3) for e in order]
+    return [root for root in roots if root.sign_minus(Fraction(0)) > 0]
+
+
+def sign_change_before(
+    c1: NDArray[np.float64],
+    c2: NDArray[np.float64],
+    c3: NDArray[np.float64],
+    limit: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """(x, before): the first sign change x of c1 + 2 c2 x + 3 c3 x^2 on (0, inf),
+    and whether it lies in (0, limit), the latter exactly (on the numbers
+    :func:`as_written`).
+
+    ``x`` is ``inf`` where there is none; it is accurate to about 1e-13
+    relative (the kind of answer is exact; the value is float-rounded).
+    Any finite coefficients; ``limit`` may be ``inf``. NaN in any input
+    gives x = NaN and ``before`` False.
+    """
+    import numpy as np
+
+    c1, c2, c3, limit = np.broadcast_arrays(
+        *(np.asarray(v, dtype=np.float64) for v in (c1, c2, c3, limit))
+    )
+    x, reliable = first_sign_change(c1, c2, c3)
+    with np.errstate(invalid="ignore"):
+        near = np.abs(x - limit) <= MARGIN * limit
+        before = x < limit
+    doubtful = ~reliable | near | ~np.isfinite(limit) | ~(limit > _SAFE_LOW)
+    x = x.copy()
+    before = before.copy()
+    unknown = np.isnan(c1) | np.isnan(c2) | np.isnan(c3) | np.isnan(limit)
+    x[unknown] = np.nan
+    before[unknown] = False
+    for index in np.flatnonzero(doubtful & ~unknown):
+        a, b, c, bound = (float(v[index]) for v in (c1, c2, c3, limit))
+        roots = exact_turning_points(a, b, c)
+        x[index] = float(roots[0].value()) if roots else math.inf
+        before[index] = bool(roots) and (
+            math.isinf(bound) or roots[0].sign_minus(as_written(bound)) < 0
+        )
+    return x, before
+
+
+# ---------------------------------------------------------------------------
+# The audit of one kind, as columns, and its output formats.
+# ---------------------------------------------------------------------------
+
+SEVERITY_ERROR = "error"
+SEVERITY_WARNING = "warning"
+SEVERITY_NOTICE = "notice"
+SEVERITIES = (SEVERITY_ERROR, SEVERITY_WARNING, SEVERITY_NOTICE)
+
+#: Statuses about a whole file: reported once per file by the distortion audit.
+FILE_STATUSES = frozenset({STATUS_XML_ERROR, STATUS_NOT_DATABASE, STATUS_UNREADABLE})
+#: Finding codes of entries that could not be audited (as lensaudit check names them).
+STATUS_CODES = {
+    STATUS_MISSING_ATTRIBUTE: "missing-attribute",
+    STATUS_BAD_VALUE: "bad-value",
+    STATUS_UNKNOWN_MODEL: "unknown-model",
+    STATUS_NO_LENS: "no-lens",
+}
+
+#: One finding: (severity, code, file, line, message).
+Finding = tuple[str, str, str, int, str]
+
+
+class CalibrationAudit:
+    """The audit of every entry of one kind: records and metric columns.
+
+    Subclasses name their columns: :attr:`COLUMNS` in output order,
+    :attr:`METRIC_COLUMNS` (numpy arrays in ``metrics``) among them, and
+    which of those hold floats or booleans.
+    """
+
+    kind = ""
+    COLUMNS: tuple[str, ...] = ()
+    METRIC_COLUMNS: tuple[str, ...] = ()
+    FLOAT_COLUMNS: frozenset[str] = frozenset()
+    BOOL_COLUMNS: frozenset[str] = frozenset()
+
+    def __init__(
+        self,
+        source: Any,
+        files: list[SourceFile],
+        entries: list[Any],
+        metrics: dict[str, Any],
+    ) -> None:
+        self.source = source
+        self.files = files
+        self.entries = entries
+        self.metrics = metrics
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    @property
+    def audited(self) -> list[bool]:
+        """Per entry: whether it was audited (status ``ok``)."""
+        return [e.status == STATUS_OK for e in self.entries]
+
+    def column(self, name: str) -> list[Any]:
+        """One output column as a list: floats (NaN where empty), text, or
+        booleans (None for entries that were not audited)."""
+        if name not in self.METRIC_COLUMNS:
+            return [getattr(e, name) for e in self.entries]
+        values = self.metrics[name].tolist()
+        if name in self.BOOL_COLUMNS:
+            return [bool(v) if ok else None for v, ok in zip(values, self.audited, strict=True)]
+        return values
+
+    def columns(self) -> dict[str, list[Any]]:
+        """All output columns, in :attr:`COLUMNS` order."""
+        return {name: self.column(name) for name in self.COLUMNS}
+
+    def records(self) -> list[dict[str, Any]]:
+        """One dict per entry, keys in :attr:`COLUMNS` order."""
+        columns = self.columns()
+        return [
+            dict(zip(self.COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)
+        ]
+
+    def to_dataframe(self) -> Any:
+        """The entries as a pandas DataFrame with :attr:`COLUMNS`."""
+        import pandas
+
+        frame = pandas.DataFrame(self.columns(), columns=list(self.COLUMNS))
+        frame["line"] = frame["line"].astype("int64")
+        for name in self.BOOL_COLUMNS:
+            frame[name] = frame[name].astype("boolean")
+        return frame
+
+    def statuses(self) -> dict[str, int]:
+        """Entries per status, ``ok`` first."""
+        counts: dict[str, int] = {STATUS_OK: 0}
+        for entry in self.entries:
+            counts[entry.status] = counts.get(entry.status, 0) + 1
+        return counts
+
+    def severities(self) -> dict[str, int]:
+        """Audited entries per severity (``error``, ``warning``, ``notice``, and ``""``)."""
+        counts = {s: 0 for s in (*SEVERITIES, "")}
+        for severity, ok in zip(self.metrics["severity"].tolist(), self.audited, strict=True):
+            if ok:
+                counts[severity] += 1
+        return counts
+
+    def summary(self) -> dict[str, Any]:
+        """Counts, as plain data (the JSON ``summary``)."""
+        return {
+            "files": len(self.files),
+            "entries": len(self.entries),
+            "audited": sum(self.audited),
+            "statuses": self.statuses(),
+            "severities": {k or "ok": v for k, v in self.severities().items()},
+        }
+
+    def lines(self) -> list[str]:
+        """The terminal summary as lines of text."""
+        raise NotImplementedError
+
+    def problem_lines(self, shown: int = 10) -> list[str]:
+        """The entries that were not audited: the first ``shown``, then a count."""
+        problems = [e for e in self.entries if e.status != STATUS_OK]
+        if not problems:
+            return []
+        counts = ", ".join(f"{n} {s}" for s, n in self.statuses().items() if s != STATUS_OK)
+        out = ["", f"Not audited: {len(problems)} entries ({counts})"]
+        out += [f"  {e.file}:{e.line}: {e.status}: {e.message}" for e in problems[:shown]]
+        if len(problems) > shown:
+            out.append(f"  ... and {len(problems) - shown} more (all of them: --format csv)")
+        return out
+
+    def write(self, output_format: str, stream: Any) -> None:
+        """Write as ``table``, ``csv`` or ``json``."""
+        {"table": self.write_table, "csv": self.write_csv, "json": self.write_json}[output_format](
+            stream
+        )
+
+    def write_table(self, stream: Any) -> None:
+        stream.write("\n".join(self.lines()) + "\n")
+
+    def write_csv(self, stream: Any) -> None:
+        """One row per entry: floats in shortest round-trip form, ``inf``, or
+        empty for values that do not apply; booleans ``true``/``false``."""
+        from .formats.csv_format import text_column
+        from .pipeline import format_floats
+
+        booleans = {True: "true", False: "false", None: ""}
+        fields = []
+        for name, values in self.columns().items():
+            if name in self.FLOAT_COLUMNS:
+                fields.append(format_floats(values))
+            elif name in self.BOOL_COLUMNS:
+                fields.append([booleans[v] for v in values])
+            elif name == "line":
+                fields.append(list(map(str, values)))
+            else:
+                fields.append(text_column(values))
+        stream.write(",".join(self.COLUMNS) + "\n")
+        for row in zip(*fields, strict=True):
+            stream.write(",".join(row) + "\n")
+
+    def document(self) -> dict[str, Any]:
+        """The JSON document as Python data (strict JSON: inf as "inf", NaN as null)."""
+        from . import __version__
+
+        def clean(value: Any) -> Any:
+            if isinstance(value, float):
+                if value != value:
+                    return None
+                if math.isinf(value):
+                    return "inf" if value > 0 else "-inf"
+            return value
+
+        return {
+            "lensaudit": __version__,
+            "kind": self.kind,
+            "database": {
+                "label": self.source.label,
+                "paths": [str(p) for p in self.source.paths],
+                "files": [
+                    {"file": f.name, "entries": f.entries, "error": f.error} for f in self.files
+                ],
+            },
+            "summary": self.summary(),
+            "entries": [{k: clean(v) for k, v in r.items()} for r in self.records()],
+        }
+
+    def write_json(self, stream: Any) -> None:
+        import json
+
+        json.dump(self.document(), stream, indent=1, allow_nan=False)
+        stream.write("\n")
+
+
+def status_findings(records: Iterable[dict[str, Any]], element: str) -> list[Finding]:
+    """Errors for entries that could not be audited, other than whole-file problems."""
+    found = []
+    for record in records:
+        status = record["status"]
+        if status in STATUS_CODES:
+            found.append(
+                (
+                    SEVERITY_ERROR,
+                    STATUS_CODES[status],
+                    record["file"],
+                    record["line"],
+                    f"{describe(record, element)}: {record['message']}",
+                )
+            )
+    return found
+
+
+def describe(record: dict[str, Any], element: str) -> str:
+    """Short name of an entry: lens and the calibration point, as far as known."""
+    name = " ".join(part for part in (record.get("maker"), record.get("lens")) if part)
+    lens = record.get("lens") or ""
+    maker = record.get("maker") or ""
+    if maker and lens.lower().startswith(maker.lower()):
+        name = lens
+    details = []
+    for key, unit in (("focal", " mm"), ("aperture", ""), ("distance", " m")):
+        value = record.get(key)
+        if isinstance(value, float) and value == value:
+            details.append(f"f/{value:g}" if key == "aperture" else f"{value:g}{unit}")
+    where = f"<{element}>" + (f" at {', '.join(details)}" if details else "")
+    return f"{name or 'unnamed lens'} {where}"

@@ -1,0 +1,316 @@
+"""Audit Lensfun's transverse chromatic aberration (TCA) models for fold-back.
+
+Lensfun corrects TCA by scaling the red and blue channels radially against
+green. ``poly3`` gives, per channel, r_d = r (b r^2 + c r + v); ``linear``
+gives r_d = k r (liblensfun's ``libs/lensfun/mod-subpix.cpp``). The radius
+is in Hugin units, as for distortion: r = 1 is half the short side of the
+calibration image (liblensfun scales ``c`` and ``b`` from that unit in
+``rescale_polynomial_coefficients``), so the frame corner is at
+hypot(aspect, 1); a circular fisheye is judged at its image circle, r = 1,
+as the distortion audit does.
+
+Like a distortion model, a channel's r_d must increase over the image, or
+the correction maps two radii onto one and mirrors that channel beyond.
+Per channel, ``r_fold`` is the first local maximum of r_d: the first r > 0
+where r_d'(r) = v + 2 c r + 3 b r^2 changes sign from + to -; 0 when r_d
+does not increase from the centre (v < 0, say); ``inf`` when it never
+folds. ``folds_in_image`` (r_fold < r_corner for either channel) is decided
+exactly on the coefficients as written
+(:func:`lensaudit.calibrations.as_written`), and is an error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .calibrations import (
+    SEVERITY_ERROR,
+    TCA,
+    CalibrationAudit,
+    CalibrationLoad,
+    Finding,
+    TCAEntry,
+    describe,
+    sign_change_before,
+    status_findings,
+)
+from .loader import STATUS_OK
+
+FloatArray = NDArray[np.float64]
+
+FOLD_IN_IMAGE = "tca-fold-in-image"
+
+CHANNELS = ("red", "blue")
+
+COLUMNS = (
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "focal",
+    "kr",
+    "kb",
+    "vr",
+    "vb",
+    "cr",
+    "cb",
+    "br",
+    "bb",
+    "r_corner",
+    "r_fold_red",
+    "r_fold_blue",
+    "folds_in_image",
+    "severity",
+    "status",
+    "message",
+)
+METRIC_COLUMNS = ("r_corner", "r_fold_red", "r_fold_blue", "folds_in_image", "severity")
+BOOL_COLUMNS = frozenset({"folds_in_image"})
+FLOAT_COLUMNS = frozenset(
+    {"crop_factor", "aspect_ratio", "focal", "kr", "kb", "vr", "vb", "cr", "cb", "br", "bb"}
+    | {"r_corner", "r_fold_red", "r_fold_blue"}
+)
+
+#: What each column means, for --help and docs/vignetting.md.
+COLUMN_HELP = {
+    "r_corner": "radius of the image judged, Hugin units: hypot(aspect, 1), "
+    "or 1 for a circular fisheye",
+    "r_fold_red": "first local maximum of the red channel's r_d (inf: never; 0: decreasing "
+    "from the centre)",
+    "r_fold_blue": "the same for blue",
+    "folds_in_image": "a channel folds inside the image, r_fold < r_corner (error)",
+    "severity": "error or empty",
+}
+
+
+def channel_coefficients(
+    model: str,
+    kr: float,
+    kb: float,
+    vr: float,
+    vb: float,
+    cr: float,
+    cb: float,
+    br: float,
+    bb: float,
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(v, c, b) of the red and of the blue channel: r_d = r (b r^2 + c r + v)."""
+    if model == "linear":
+        return (kr, 0.0, 0.0), (kb, 0.0, 0.0)
+    return (vr, cr, br), (vb, cb, bb)
+
+
+def r_fold(
+    v: ArrayLike, c: ArrayLike, b: ArrayLike, r_corner: ArrayLike
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """(r_fold, folds): first local maximum of r (b r^2 + c r + v), and whether it
+    lies inside the image, r_fold < r_corner (exactly).
+
+    r_fold is 0 where r_d does not increase from the centre (the first
+    non-zero of v, c, b is negative, or all are 0), ``inf`` where r_d never
+    folds. Any finite coefficients.
+    """
+    v, c, b, r_corner = np.broadcast_arrays(
+        *(np.atleast_1d(np.asarray(x, dtype=np.float64)) for x in (v, c, b, r_corner))
+    )
+    # The sign of r_d' just right of 0: that of its first non-zero coefficient.
+    start = np.where(v != 0, np.sign(v), np.where(c != 0, np.sign(c), np.sign(b)))
+    x, before = sign_change_before(v, c, b, r_corner)
+    decreasing = start <= 0
+    return np.where(decreasing, 0.0, x), decreasing | before
+
+
+def compute(
+    model: Sequence[str],
+    kr: ArrayLike,
+    kb: ArrayLike,
+    vr: ArrayLike,
+    vb: ArrayLike,
+    cr: ArrayLike,
+    cb: ArrayLike,
+    br: ArrayLike,
+    bb: ArrayLike,
+    r_corner: ArrayLike,
+) -> dict[str, NDArray[Any]]:
+    """The metric columns of finite coefficients, one element per entry."""
+    linear = np.asarray(model) == "linear"
+    arrays = {
+        name: np.asarray(values, dtype=np.float64)
+        for name, values in dict(kr=kr, kb=kb, vr=vr, vb=vb, cr=cr, cb=cb, br=br, bb=bb).items()
+    }
+    result: dict[str, NDArray[Any]] = {"r_corner": np.asarray(r_corner, dtype=np.float64)}
+    folds = np.zeros(linear.shape, dtype=bool)
+    for channel, (k, v, c, b) in zip(
+        CHANNELS, (("kr", "vr", "cr", "br"), ("kb", "vb", "cb", "bb")), strict=True
+    ):
+        values = np.where(linear, arrays[k], arrays[v])
+        first = np.where(linear, 0.0, arrays[c])
+        second = np.where(linear, 0.0, arrays[b])
+        radius, inside = r_fold(values, first, second, r_corner)
+        result[f"r_fold_{channel}"] = radius
+        folds |= inside
+    result["folds_in_image"] = folds
+    result["severity"] = np.where(folds, SEVERITY_ERROR, "").astype(object)
+    return result
+
+
+class TCAAudit(CalibrationAudit):
+    """The audit of every ``<tca>`` entry (see :func:`audit`)."""
+
+    kind = TCA
+    COLUMNS = COLUMNS
+    METRIC_COLUMNS = METRIC_COLUMNS
+    FLOAT_COLUMNS = FLOAT_COLUMNS
+    BOOL_COLUMNS = BOOL_COLUMNS
+
+    def folding(self) -> list[int]:
+        """Indices of the entries that fold inside their image, by r_fold / r_corner."""
+        m = self.metrics
+        ratio = np.minimum(m["r_fold_red"], m["r_fold_blue"]) / m["r_corner"]
+        rows = [i for i, ok in enumerate(self.audited) if ok and m["folds_in_image"][i]]
+        return sorted(rows, key=lambda i: (ratio[i], self.entries[i].file, self.entries[i].line))
+
+    def summary(self) -> dict[str, Any]:
+        summary = super().summary()
+        models: dict[str, int] = {}
+        for entry, ok in zip(self.entries, self.audited, strict=True):
+            if ok:
+                models[entry.model] = models.get(entry.model, 0) + 1
+        folding = self.folding()
+        summary.update(
+            models=models,
+            folds_in_image=len(folding),
+            folding=[f"{self.entries[i].file}:{self.entries[i].line}" for i in folding],
+        )
+        return summary
+
+    def lines(self) -> list[str]:
+        from . import __version__
+        from .formats.table import text_table
+
+        summary = self.summary()
+        models = ", ".join(f"{n} {m}" for m, n in summary["models"].items())
+        out = [
+            f"lensaudit {__version__}: {self.source.label}",
+            f"{summary['files']} file{'s' if summary['files'] != 1 else ''}, "
+            f"{summary['entries']} TCA entries, {summary['audited']} audited"
+            + (f" ({models})" if models else ""),
+            "",
+            "TCA r_d = r (b r^2 + c r + v) per channel, Hugin units (corner at hypot(aspect, 1))",
+            f"Entries with a channel that folds inside the image: {summary['folds_in_image']}",
+        ]
+        folding = self.folding()
+        if folding:
+            m = self.metrics
+            out += text_table(
+                ["r_fold_red", "r_fold_blue", "r_corner", "maker", "lens", "focal", "where"],
+                [
+                    [
+                        f"{m['r_fold_red'][i]:.4g}",
+                        f"{m['r_fold_blue'][i]:.4g}",
+                        f"{m['r_corner'][i]:.4g}",
+                        self.entries[i].maker,
+                        self.entries[i].lens,
+                        f"{self.entries[i].focal:g}",
+                        f"{self.entries[i].file}:{self.entries[i].line}",
+                    ]
+                    for i in folding
+                ],
+                right=[True, True, True, False, False, True, False],
+            )
+        return out + self.problem_lines()
+
+
+def audit_entries(
+    entries: Sequence[TCAEntry], source: Any = None, files: list | None = None
+) -> TCAAudit:
+    """Compute the metrics of loaded TCA records (see :func:`compute`)."""
+    from . import database
+    from .metrics import image_radius, is_circular_fisheye
+
+    size = len(entries)
+    ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
+    rows = np.flatnonzero(ok)
+
+    def floats(name: str) -> FloatArray:
+        return np.fromiter((getattr(entries[i], name) for i in rows), np.float64, rows.size)
+
+    circular = [is_circular_fisheye(entries[i].lens, entries[i].type) for i in rows]
+    with np.errstate(all="ignore"):
+        radius = image_radius(floats("aspect_ratio"), circular)
+    computed = compute(
+        [entries[i].model for i in rows],
+        *(floats(n) for n in ("kr", "kb", "vr", "vb", "cr", "cb", "br", "bb")),
+        radius,
+    )
+    metrics: dict[str, NDArray[Any]] = {}
+    for name, values in computed.items():
+        if name in BOOL_COLUMNS:
+            full = np.zeros(size, dtype=bool)
+        elif name == "severity":
+            full = np.full(size, "", dtype=object)
+        else:
+            full = np.full(size, np.nan)
+        full[rows] = values
+        metrics[name] = full
+    if source is None:
+        source = database.DatabaseSource((), "entries given in memory")
+    return TCAAudit(source, files or [], list(entries), metrics)
+
+
+def audit(paths: Any = None) -> TCAAudit:
+    """Audit the TCA entries of database directories and/or XML files (the
+    bundled database without ``paths``). Raises
+    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
+    from .calibrations import load
+
+    source, loaded = load(paths)
+    return from_load(loaded, source)
+
+
+def from_load(loaded: CalibrationLoad, source: Any = None) -> TCAAudit:
+    """The TCA audit of records already read by :mod:`lensaudit.calibrations`."""
+    return audit_entries(loaded.tca, source, loaded.files)
+
+
+def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
+    """(severity, code, file, line, message) for each audited record that folds
+    inside its image (``tca-fold-in-image``, an error), and an error for each
+    record that could not be audited (``missing-attribute``, ``bad-value``,
+    ``unknown-model``, ``no-lens``; whole-file problems are left to the
+    distortion check, which reports them once per file).
+
+    ``records`` are dicts with :data:`COLUMNS` keys, as
+    :meth:`TCAAudit.records` gives them.
+    """
+    records = list(records)
+    found = status_findings(records, "tca")
+    for record in records:
+        if record["status"] != STATUS_OK or not record["folds_in_image"]:
+            continue
+        r_corner = record["r_corner"]
+        parts = []
+        for channel in CHANNELS:
+            radius = record[f"r_fold_{channel}"]
+            if radius == 0:
+                parts.append(f"the {channel} channel's r_d decreases from the centre")
+            elif radius < r_corner:
+                parts.append(f"the {channel} channel's r_d peaks at r = {radius:.4g}")
+        text = (
+            f"{' and '.join(parts)}, inside the image (to r = {r_corner:.4g}, Hugin units): "
+            "the correction maps two radii onto one and mirrors that channel beyond"
+        )
+        name = describe(record, "tca")
+        found.append(
+            (SEVERITY_ERROR, FOLD_IN_IMAGE, record["file"], record["line"], f"{name}: {text}")
+        )
+    found.sort(key=lambda f: (f[2], f[3]))
+    return found

@@ -1,0 +1,482 @@
+"""Audit Lensfun's vignetting models: where the correction divides by zero.
+
+Lensfun's ``pa`` model gives the brightness of the image relative to its
+centre, C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6, and the correction divides
+every pixel by C(r). Here r = 1 is half the diagonal of the calibration
+sensor, whatever its aspect ratio: liblensfun converts the coefficients from
+that unit, hypot(36, 24) / (2 crop) millimetres (``libs/lensfun/mod-color.cpp``,
+``rescale_polynomial_coefficients``), and the liblensfun of lensfunpy puts
+r = 1 on the corner pixels (tests/test_vignetting_liblensfun.py measures
+it). So the frame corner is r = 1; for a circular fisheye, whose image circle
+is inscribed in the short side, the audit judges the circle instead, at
+r = 1 / hypot(aspect, 1), as the distortion audit does.
+
+Per entry, with w = r^2 and C a cubic in w:
+
+- ``r_zero``: the first radius where C changes sign, sqrt of
+  :func:`lensaudit.solver.min_positive_root` (exact in kind; ``inf`` if never);
+- ``c_min`` and ``r_min``: the minimum of C over the image, 0 <= r <=
+  ``r_corner``, and where it is (at an end or where C'(w) = k1 + 2 k2 w +
+  3 k3 w^2 vanishes);
+- ``r_turn``: the first radius where C' changes sign (``inf`` if never);
+  C is monotone over the image when that lies beyond it;
+- ``zero_in_image`` (C <= 0 somewhere in the image: the correction divides
+  by zero or flips the sign of pixels; liblensfun then writes black),
+  ``low_in_image`` (C < 0.1: a correction gain above 10, which amplifies the
+  noise tenfold) and ``monotone``, each decided exactly on the coefficients
+  as the database writes them (:func:`lensaudit.calibrations.as_written`):
+  the float answer where it is far from the boundary, rational arithmetic
+  otherwise.
+
+Severity: ``error`` for zero_in_image, ``warning`` for low_in_image,
+``notice`` for a C that is not monotone over the image.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .calibrations import (
+    MARGIN,
+    SEVERITY_ERROR,
+    SEVERITY_NOTICE,
+    SEVERITY_WARNING,
+    VIGNETTING,
+    CalibrationAudit,
+    CalibrationLoad,
+    ExactTurn,
+    Finding,
+    VignettingEntry,
+    _sign,
+    as_written,
+    describe,
+    exact_turning_points,
+    sign_change_before,
+    sign_of_surd,
+    status_findings,
+    turning_points,
+)
+from .loader import STATUS_OK
+
+FloatArray = NDArray[np.float64]
+
+#: C below this is a correction gain above 10 (a warning).
+LOW_CORRECTION = 0.1
+_LOW_EXACT = Fraction(1, 10)
+
+ZERO_IN_IMAGE = "vignetting-zero-in-image"
+LOW_IN_IMAGE = "vignetting-low-in-image"
+NOT_MONOTONE = "vignetting-not-monotone"
+
+#: How many entries the terminal summary lists by name.
+WORST_SHOWN = 15
+
+COLUMNS = (
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "focal",
+    "aperture",
+    "distance",
+    "k1",
+    "k2",
+    "k3",
+    "r_corner",
+    "r_zero",
+    "c_min",
+    "r_min",
+    "r_turn",
+    "zero_in_image",
+    "low_in_image",
+    "monotone",
+    "severity",
+    "status",
+    "message",
+)
+METRIC_COLUMNS = (
+    "r_corner",
+    "r_zero",
+    "c_min",
+    "r_min",
+    "r_turn",
+    "zero_in_image",
+    "low_in_image",
+    "monotone",
+    "severity",
+)
+BOOL_COLUMNS = frozenset({"zero_in_image", "low_in_image", "monotone"})
+FLOAT_COLUMNS = frozenset(
+    {"crop_factor", "aspect_ratio", "focal", "aperture", "distance", "k1", "k2", "k3"}
+    | {"r_corner", "r_zero", "c_min", "r_min", "r_turn"}
+)
+
+#: What each column means, for --help and docs/vignetting.md.
+COLUMN_HELP = {
+    "r_corner": "radius of the image judged, r = 1 at half the diagonal: 1 (frame corner), "
+    "or the image circle 1/hypot(aspect, 1) of a circular fisheye",
+    "r_zero": "first radius where C(r) changes sign (inf: never)",
+    "c_min": "minimum of C(r) over the image, 0 <= r <= r_corner",
+    "r_min": "where that minimum is",
+    "r_turn": "first radius where C'(r) changes sign (inf: never)",
+    "zero_in_image": "C <= 0 somewhere in the image (error)",
+    "low_in_image": "C < 0.1 somewhere in the image: correction gain above 10 (warning)",
+    "monotone": "C has no turning point inside the image (false: notice)",
+    "severity": "error, warning, notice, or empty",
+}
+
+
+def image_radius(aspect_ratio: ArrayLike, circular: ArrayLike | None = None) -> FloatArray:
+    """Radius of the image judged, in units of half the diagonal.
+
+    1 (the frame corner); for a circular fisheye, the circle inscribed in the
+    short side, 1 / hypot(aspect, 1).
+    """
+    from .metrics import image_corner
+
+    corner = np.ones(np.shape(aspect_ratio))
+    if circular is None:
+        return corner
+    with np.errstate(all="ignore"):
+        circle = 1.0 / image_corner(aspect_ratio)
+    return np.where(np.asarray(circular, dtype=bool), circle, corner)
+
+
+def evaluate(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike, r: ArrayLike) -> FloatArray:
+    """C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6, elementwise (overflow gives inf, no warning)."""
+    with np.errstate(all="ignore"):
+        w = np.square(np.asarray(r, dtype=np.float64))
+        return 1.0 + w * (np.asarray(k1) + w * (np.asarray(k2) + w * np.asarray(k3)))
+
+
+def _cubic(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike, w: ArrayLike) -> FloatArray:
+    return 1.0 + w * (k1 + w * (k2 + w * k3))
+
+
+def _remainder(k1: Fraction, k2: Fraction, k3: Fraction) -> tuple[Fraction, Fraction]:
+    """(rho0, rho1): C(w) = Q(w) C'(w) + rho0 + rho1 w, so that C = rho0 + rho1 w
+    wherever C' = 0 (C' of degree 1 or 2)."""
+    numerator = [Fraction(1), k1, k2, k3]
+    divisor = [k1, 2 * k2, 3 * k3]
+    while divisor and divisor[-1] == 0:
+        divisor.pop()
+    while len(numerator) >= len(divisor):
+        factor = numerator[-1] / divisor[-1]
+        shift = len(numerator) - len(divisor)
+        for index, coefficient in enumerate(divisor):
+            numerator[shift + index] -= factor * coefficient
+        numerator.pop()
+    numerator += [Fraction(0)] * (2 - len(numerator))
+    return numerator[0], numerator[1]
+
+
+def _turns_inside(k1: float, k2: float, k3: float, w_image: Fraction) -> list[ExactTurn]:
+    return [t for t in exact_turning_points(k1, k2, k3) if t.sign_minus(w_image) < 0]
+
+
+def exact_below(
+    k1: float, k2: float, k3: float, w_image: float, threshold: Fraction, strict: bool
+) -> bool:
+    """Whether min C over 0 <= w <= w_image is below ``threshold`` (< if ``strict``,
+    else <=), exactly, for finite coefficients taken :func:`as_written`.
+    ``threshold`` < 1."""
+    a1, a2, a3, limit = (as_written(v) for v in (k1, k2, k3, w_image))
+
+    def hit(sign: int) -> bool:
+        return sign < 0 if strict else sign <= 0
+
+    if hit(_sign(1 + limit * (a1 + limit * (a2 + limit * a3)) - threshold)):
+        return True
+    turns = _turns_inside(k1, k2, k3, limit)
+    if not turns:
+        return False
+    rho0, rho1 = _remainder(a1, a2, a3)
+    for turn in turns:
+        # C(x) - threshold = (rho1 (p + e sqrt d) + (rho0 - threshold) q) / q
+        sign = sign_of_surd(rho1 * turn.p + (rho0 - threshold) * turn.q, rho1 * turn.e, turn.d)
+        if hit(sign * _sign(turn.q)):
+            return True
+    return False
+
+
+def exact_minimum(k1: float, k2: float, k3: float, w_image: float) -> tuple[float, float]:
+    """(c_min, w where it is) over 0 <= w <= w_image, to about 1e-40 before rounding."""
+    a1, a2, a3, limit = (as_written(v) for v in (k1, k2, k3, w_image))
+    candidates = [Fraction(0), limit] + [t.value() for t in _turns_inside(k1, k2, k3, limit)]
+    values = [1 + w * (a1 + w * (a2 + w * a3)) for w in candidates]
+    best = min(range(len(values)), key=values.__getitem__)
+    return float(values[best]), float(candidates[best])
+
+
+def compute(
+    k1: ArrayLike,
+    k2: ArrayLike,
+    k3: ArrayLike,
+    r_corner: ArrayLike,
+) -> dict[str, NDArray[Any]]:
+    """The metric columns (see the module docstring) of finite coefficients.
+
+    ``r_corner`` is the radius of the image judged, r = 1 at half the
+    diagonal. Returns arrays keyed by column name, ``severity`` as text.
+    """
+    from .solver import min_positive_root
+
+    k1, k2, k3, r_corner = np.broadcast_arrays(
+        *(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (k1, k2, k3, r_corner))
+    )
+    size = k1.shape[0]
+    w_image = np.square(r_corner)
+    r_zero = np.sqrt(np.asarray(min_positive_root(k1, k2, k3), dtype=np.float64))
+
+    low, high, reliable = turning_points(k1, k2, k3)
+    with np.errstate(all="ignore"):
+        points = np.stack([np.zeros(size), w_image, low, high], axis=1)
+        inside = np.ones(points.shape, dtype=bool)
+        inside[:, 2:] = (points[:, 2:] > 0) & (points[:, 2:] < w_image[:, None])
+        values = _cubic(k1[:, None], k2[:, None], k3[:, None], points)
+        values = np.where(inside, values, np.inf)
+        best = np.argmin(values, axis=1)
+        c_min = values[np.arange(size), best]
+        w_min = points[np.arange(size), best]
+        size_of_terms = 1 + np.abs(k1) * w_image + np.abs(k2) * w_image**2 + np.abs(k3) * w_image**3
+        near_edge = (np.abs(low - w_image) <= MARGIN * w_image) | (
+            np.abs(high - w_image) <= MARGIN * w_image
+        )
+        doubtful = (
+            ~reliable
+            | near_edge
+            | ~np.isfinite(c_min)
+            | ~np.isfinite(size_of_terms)
+            | (np.abs(c_min) <= MARGIN * size_of_terms)
+            | (np.abs(c_min - LOW_CORRECTION) <= MARGIN * size_of_terms)
+        )
+        zero_in_image = c_min <= 0
+        low_in_image = c_min < LOW_CORRECTION
+    for index in np.flatnonzero(doubtful):
+        a, b, c, w = (float(v[index]) for v in (k1, k2, k3, w_image))
+        zero_in_image[index] = exact_below(a, b, c, w, Fraction(0), strict=False)
+        low_in_image[index] = exact_below(a, b, c, w, _LOW_EXACT, strict=True)
+        c_min[index], w_min[index] = exact_minimum(a, b, c, w)
+
+    w_turn, turns_inside = sign_change_before(k1, k2, k3, w_image)
+    severity = np.where(
+        zero_in_image,
+        SEVERITY_ERROR,
+        np.where(low_in_image, SEVERITY_WARNING, np.where(turns_inside, SEVERITY_NOTICE, "")),
+    ).astype(object)
+    return {
+        "r_corner": r_corner.copy(),
+        "r_zero": r_zero,
+        "c_min": c_min,
+        "r_min": np.sqrt(w_min),
+        "r_turn": np.sqrt(w_turn),
+        "zero_in_image": zero_in_image,
+        "low_in_image": low_in_image,
+        "monotone": ~turns_inside,
+        "severity": severity,
+    }
+
+
+class VignettingAudit(CalibrationAudit):
+    """The audit of every ``<vignetting>`` entry (see :func:`audit`)."""
+
+    kind = VIGNETTING
+    COLUMNS = COLUMNS
+    METRIC_COLUMNS = METRIC_COLUMNS
+    FLOAT_COLUMNS = FLOAT_COLUMNS
+    BOOL_COLUMNS = BOOL_COLUMNS
+
+    def worst(self, limit: int | None = None) -> list[int]:
+        """Indices of the entries with a finding, by increasing c_min."""
+        c_min = self.metrics["c_min"]
+        flagged = [
+            i
+            for i, (severity, ok) in enumerate(
+                zip(self.metrics["severity"].tolist(), self.audited, strict=True)
+            )
+            if ok and severity in (SEVERITY_ERROR, SEVERITY_WARNING)
+        ]
+        flagged.sort(key=lambda i: (c_min[i], self.entries[i].file, self.entries[i].line))
+        return flagged[:limit]
+
+    def summary(self) -> dict[str, Any]:
+        summary = super().summary()
+        audited = np.array(self.audited, dtype=bool)
+        summary.update(
+            zero_in_image=int(np.count_nonzero(self.metrics["zero_in_image"] & audited)),
+            low_in_image=int(np.count_nonzero(self.metrics["low_in_image"] & audited)),
+            not_monotone=int(np.count_nonzero(~self.metrics["monotone"] & audited)),
+            worst=[f"{self.entries[i].file}:{self.entries[i].line}" for i in self.worst(20)],
+        )
+        return summary
+
+    def lines(self) -> list[str]:
+        from . import __version__
+        from .formats.table import text_table
+
+        summary = self.summary()
+        out = [
+            f"lensaudit {__version__}: {self.source.label}",
+            f"{summary['files']} file{'s' if summary['files'] != 1 else ''}, "
+            f"{summary['entries']} vignetting entries, {summary['audited']} audited",
+            "",
+            "Vignetting C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6, r = 1 at half the diagonal "
+            "(the frame corner; a circular fisheye's image circle at 1/hypot(aspect, 1))",
+        ]
+        out += text_table(
+            ["severity", "entries", "finding"],
+            [
+                [
+                    "error",
+                    summary["zero_in_image"],
+                    "C <= 0 inside the image: the correction divides by zero or flips sign",
+                ],
+                [
+                    "warning",
+                    summary["low_in_image"] - summary["zero_in_image"],
+                    "0 < C < 0.1 inside the image: a correction gain above 10",
+                ],
+                [
+                    "notice",
+                    summary["severities"]["notice"],
+                    "C not monotone inside the image (and none of the above)",
+                ],
+            ],
+            right=[False, True, False],
+        )
+        out.append(f"(C not monotone inside the image, whatever else: {summary['not_monotone']}.)")
+        worst = self.worst()
+        out.append("")
+        out.append(f"Entries where C falls below 0.1 inside the image: {len(worst)}")
+        if worst:
+            m = self.metrics
+            shown = worst[:WORST_SHOWN]
+            out += text_table(
+                ["c_min", "r_zero", "maker", "lens", "focal", "f/", "distance", "where"],
+                [
+                    [
+                        f"{m['c_min'][i]:.3g}",
+                        f"{m['r_zero'][i]:.3f}",
+                        self.entries[i].maker,
+                        self.entries[i].lens,
+                        f"{self.entries[i].focal:g}",
+                        f"{self.entries[i].aperture:g}",
+                        f"{self.entries[i].distance:g}",
+                        f"{self.entries[i].file}:{self.entries[i].line}",
+                    ]
+                    for i in shown
+                ],
+                right=[True, True, False, False, True, True, True, False],
+            )
+            if len(worst) > len(shown):
+                out.append(f"  ... and {len(worst) - len(shown)} more (all of them: --format csv)")
+        return out + self.problem_lines()
+
+
+def audit_entries(
+    entries: Sequence[VignettingEntry], source: Any = None, files: list | None = None
+) -> VignettingAudit:
+    """Compute the metrics of loaded vignetting records (see :func:`compute`)."""
+    from . import database
+    from .metrics import is_circular_fisheye
+
+    size = len(entries)
+    ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
+    rows = np.flatnonzero(ok)
+
+    def floats(name: str) -> FloatArray:
+        return np.fromiter((getattr(entries[i], name) for i in rows), np.float64, rows.size)
+
+    circular = [is_circular_fisheye(entries[i].lens, entries[i].type) for i in rows]
+    radius = image_radius(floats("aspect_ratio"), circular)
+    computed = compute(floats("k1"), floats("k2"), floats("k3"), radius)
+    metrics: dict[str, NDArray[Any]] = {}
+    for name, values in computed.items():
+        if name in BOOL_COLUMNS:
+            full = np.zeros(size, dtype=bool)
+        elif name == "severity":
+            full = np.full(size, "", dtype=object)
+        else:
+            full = np.full(size, np.nan)
+        full[rows] = values
+        metrics[name] = full
+    if source is None:
+        source = database.DatabaseSource((), "entries given in memory")
+    return VignettingAudit(source, files or [], list(entries), metrics)
+
+
+def audit(paths: Any = None) -> VignettingAudit:
+    """Audit the vignetting entries of database directories and/or XML files
+    (the bundled database without ``paths``). Raises
+    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
+    from .calibrations import load
+
+    source, loaded = load(paths)
+    return from_load(loaded, source)
+
+
+def from_load(loaded: CalibrationLoad, source: Any = None) -> VignettingAudit:
+    """The vignetting audit of records already read by :mod:`lensaudit.calibrations`."""
+    return audit_entries(loaded.vignetting, source, loaded.files)
+
+
+def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
+    """(severity, code, file, line, message) for each audited record with a
+    finding, and an error for each record that could not be audited (except
+    whole-file problems, which the distortion check reports once per file).
+
+    ``records`` are dicts with :data:`COLUMNS` keys, as
+    :meth:`VignettingAudit.records` gives them. Codes:
+    ``vignetting-zero-in-image`` (error), ``vignetting-low-in-image``
+    (warning), ``vignetting-not-monotone`` (notice), and the status codes
+    ``missing-attribute``, ``bad-value``, ``unknown-model``, ``no-lens``.
+    """
+    records = list(records)
+    found = status_findings(records, "vignetting")
+    for record in records:
+        if record["status"] != STATUS_OK:
+            continue
+        severity = record["severity"]
+        if not severity:
+            continue
+        name = describe(record, "vignetting")
+        c_min, r_min, r_corner = record["c_min"], record["r_min"], record["r_corner"]
+        where = "the frame corner" if r_corner == 1 else "the image circle"
+        at = f"r = {r_min:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g}, {where})"
+        if severity == SEVERITY_ERROR:
+            code = ZERO_IN_IMAGE
+            r_zero = record["r_zero"]
+            crossing = (
+                f"crossing zero at r = {r_zero:.4g}"
+                if r_zero <= r_corner
+                else "touching zero without crossing"
+            )
+            text = (
+                f"C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6 reaches {c_min:.4g} at {at}, "
+                f"{crossing}: the correction divides by zero there and flips the sign "
+                "of the pixels where C < 0"
+            )
+        elif severity == SEVERITY_WARNING:
+            code = LOW_IN_IMAGE
+            text = (
+                f"C(r) falls to {c_min:.4g} at {at}: the correction multiplies those pixels "
+                f"(and their noise) by {1 / c_min:.3g}"
+            )
+        else:
+            code = NOT_MONOTONE
+            text = (
+                f"C(r) turns at r = {record['r_turn']:.4g}, inside the image "
+                f"(to {r_corner:.3g}): the brightness model is not monotone"
+            )
+        found.append((severity, code, record["file"], record["line"], f"{name}: {text}"))
+    found.sort(key=lambda f: (f[2], f[3]))
+    return found
