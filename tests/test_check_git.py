@@ -345,3 +345,13 @@ def test_junit_file_paths_are_relative_to_the_repository_root(
     assert {suite.get("name") for suite in root.iter("testsuite")} == {
         f"data/db/{name}" for name in BASELINE_FILES
     }
+
+
+def test_a_checkout_root_given_as_path_is_compared_at_its_data_db(repository):
+    fold_line, malformed_line = repository.commit_change()
+    result = check(repository.root, baseline=repository.baseline)
+    assert [(Path(f.file).name, f.line) for f in result.findings if f.fails] == [
+        (CHANGED_FILE, fold_line),
+        (CHANGED_FILE, malformed_line),
+    ]
+    assert len(result.files) == len(BASELINE_FILES)

@@ -260,9 +260,11 @@ def check(
     margin: float = DEFAULT_MARGIN,
     verbose: bool = False,
 ) -> CheckResult:
-    """Check a Lensfun database (directories and/or XML files; None: the bundled one).
+    """Check a Lensfun database: directories and/or XML files, where a Lensfun
+    checkout means its ``data/db``; None: the checkout around the working
+    directory, else the database bundled with lensfunpy.
 
-    A Lensfun checkout given as a path means its ``data/db``. ``baseline``
+    ``baseline``
     is an existing directory or file, or else a git revision of the
     repository holding the paths. ``margin`` (>= 1) is the r_normalized
     below which a fold outside the image is a warning; ``verbose`` adds the
