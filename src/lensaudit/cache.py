@@ -1,18 +1,24 @@
 """A cache of parsed and audited database files, keyed by their content.
 
-Each file's entries, and their metrics once computed, are stored with a
-BLAKE2b digest of the file's bytes. A file is trusted to be unchanged only
-when its bytes hash to the stored digest: its size and modification time
-prove nothing (``git checkout``, ``rsync -t`` and ``tar`` restore times, and
-an edit may keep the size). Scanning an unchanged database still reads and
-hashes every file (a few milliseconds for Lensfun's 4 MB), but parses no XML
-and imports no numpy. On a miss the file is parsed from the very bytes that
-were hashed, so that a digest is never stored beside another content's
-entries.
+Each file's entries, their metrics once computed, and the rows output
+formats render from them are stored with a BLAKE2b digest of the file's
+bytes. A file is trusted to be unchanged only when its bytes hash to the
+stored digest: its size and modification time prove nothing (``git
+checkout``, ``rsync -t`` and ``tar`` restore times, and an edit may keep the
+size). Scanning an unchanged database still reads and hashes every file (a
+few milliseconds for Lensfun's 4 MB), but parses no XML and imports no numpy.
 
-Metrics are valid only for the code that computed them: every cache file is
-tied to lensaudit's version, the record layout and a digest of the package's
-top-level modules (the loader, the solver, the metrics and what they use).
+The cache never reads or parses a database file itself: its caller hashes
+the bytes it read (:func:`content_digest`), asks for a record with that
+digest, and on a miss stores what it parsed from those very bytes, so that a
+digest is never stored beside another content's entries.
+
+Metrics and rendered rows are valid only for the code that made them: every
+cache file is tied to lensaudit's version, the record layout and a digest of
+the package's top-level modules and output formats (the loader, the solver,
+the metrics, the CSV and JSON writers and what they use). Rendered rows also
+name their file as it was shown when they were made, and serve only a scan
+that shows it the same way.
 
 Where: ``$LENSAUDIT_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/lensaudit``
 (if that is an absolute path, as the XDG specification requires), else
@@ -32,8 +38,10 @@ it (unreadable or read-only directory, full disk, garbage) means parsing as
 if it were not there, without a message.
 
 Records hold each column of a file's entries as one object (a block of
-doubles, or texts joined into one string), so reading the cache creates no
-object per value until the entries are built, and it cannot run code.
+doubles, or texts joined into one string): reading the cache creates no
+object per value until a column is asked for, and it cannot run code. The
+same packed columns carry parsed files between processes
+(:mod:`lensaudit.workers`).
 """
 
 from __future__ import annotations
@@ -43,7 +51,7 @@ import os
 import stat as stat_module
 import time
 from array import array
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from itertools import islice
 from operator import attrgetter
 from pathlib import Path
@@ -54,8 +62,8 @@ except ImportError:
     from hashlib import blake2b
 
 from . import __version__
-from .loader import DistortionEntry, read_bytes, read_file
-from .pipeline import METRIC_FLOAT_COLUMNS
+from .columns import METRIC_FLAG_COLUMNS, METRIC_FLOAT_COLUMNS
+from .loader import DistortionEntry
 
 #: Cache files kept in the cache directory, at most (least recently used go first).
 MAX_CACHE_FILES = 16
@@ -80,34 +88,37 @@ _FIELDS = tuple(f.name for f in fields(DistortionEntry))
 _KINDS = {f.name: _kind(f.type) for f in fields(DistortionEntry) if f.name != "file"}
 _KNOWN_KINDS = {"float", "int", "str", "tuple[str, ...]"}
 _PACKABLE = _FIELDS[0] == "file" and set(_KINDS.values()) <= _KNOWN_KINDS
-_METRIC_FLAGS = ("tail", "folds_in_image")  # small integers
 _SEPARATOR = "\0"
+#: Where the code that makes entries, metrics and rendered rows lives.
+_CODE = ("*.py", "formats/*.py")
 
 
 def _code_digest() -> str:
-    """Digest of the package's top-level modules, which decide entries and metrics.
+    """Digest of the package's top-level modules and output formats.
 
-    All of them, not a chosen few: a module the loader or the metrics start
-    to rely on must not be forgotten here.
+    All of them, not a chosen few: a module the loader, the metrics or a
+    format start to rely on must not be forgotten here.
     """
     digest = blake2b(digest_size=16)
-    for module in sorted(Path(__file__).parent.glob("*.py")):
+    package = Path(__file__).parent
+    for module in sorted(path for pattern in _CODE for path in package.glob(pattern)):
         try:
-            digest.update(module.name.encode() + b"\0" + module.read_bytes())
-        except OSError:  # not installed from source files: the version must do
+            name = module.relative_to(package).as_posix()
+            digest.update(name.encode() + b"\0" + module.read_bytes())
+        except (OSError, ValueError):  # not installed from source files: the version must do
             pass
     return digest.hexdigest()
 
 
 # Changes with the package version, the record layout and the auditing code.
 _FORMAT = (
-    f"lensaudit parse cache 4 {__version__} {_code_digest()} "
+    f"lensaudit parse cache 5 {__version__} {_code_digest()} "
     f"{' '.join(f'{name}:{kind}' for name, kind in _KINDS.items())} "
-    f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(_METRIC_FLAGS)}"
+    f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(METRIC_FLAG_COLUMNS)} rows"
 ).encode()
 
 
-def _checksum(body: bytes) -> bytes:
+def _checksum(body: bytes | memoryview) -> bytes:
     digest = blake2b(_FORMAT, digest_size=_CHECKSUM_SIZE)
     digest.update(body)
     return digest.digest()
@@ -136,11 +147,17 @@ def _split(stored: str | list[str], count: int) -> list[str]:
     return values
 
 
-def _pack(entries: list[DistortionEntry]) -> dict[str, object]:
-    """Entries as columns: numbers as blocks of bytes, texts joined."""
-    packed: dict[str, object] = {"count": len(entries)}
+def entry_columns(entries: list[DistortionEntry]) -> dict[str, list]:
+    """The entries as columns: field name -> one value per entry (``file`` left out)."""
+    return {name: list(map(attrgetter(name), entries)) for name in _KINDS}
+
+
+def pack_columns(columns: dict[str, list], count: int) -> dict[str, object]:
+    """Entry columns (as :func:`entry_columns` gives them) packed: numbers as
+    blocks of bytes, texts joined."""
+    packed: dict[str, object] = {"count": count}
     for name, kind in _KINDS.items():
-        values = list(map(attrgetter(name), entries))
+        values = columns[name]
         if kind == "float":
             packed[name] = array("d", values).tobytes()
         elif kind == "int":
@@ -155,52 +172,114 @@ def _pack(entries: list[DistortionEntry]) -> dict[str, object]:
     return packed
 
 
-def _unpack(packed: dict, name: str) -> list[DistortionEntry]:
-    """The entries of a packed record, reported as file ``name``."""
+def pack_entries(entries: list[DistortionEntry]) -> dict[str, object]:
+    """Entries as packed columns (see :func:`pack_columns`)."""
+    return pack_columns(entry_columns(entries), len(entries))
+
+
+def packed_count(packed: dict) -> int:
+    """The number of entries in packed columns, once every column is checked to hold
+    that many; raises ValueError (or another of :data:`RECORD_ERRORS`) otherwise."""
     count = packed["count"]
     if not isinstance(count, int) or count < 0:
         raise ValueError("inconsistent cache record")
-    columns: dict[str, list] = {"file": [name] * count}
     for field, kind in _KINDS.items():
         stored = packed[field]
-        if kind == "float":
-            values = array("d", stored).tolist()
-        elif kind == "int":
-            values = array("q", stored).tolist()
-        elif kind == "str":
-            values = _split(stored, count)
-        else:
-            lengths = array("q", stored[0])
-            if any(length < 0 for length in lengths):
+        if kind in ("float", "int"):
+            if not isinstance(stored, bytes) or len(stored) != 8 * count:
                 raise ValueError("inconsistent cache record")
-            texts = iter(_split(stored[1], sum(lengths)))
-            values = [tuple(islice(texts, length)) for length in lengths]
-        if len(values) != count:
+        elif kind == "str":
+            _check_texts(stored, count)
+        else:
+            lengths, texts = stored
+            if not isinstance(lengths, bytes) or len(lengths) != 8 * count:
+                raise ValueError("inconsistent cache record")
+            lengths = array("q", lengths)
+            if lengths and min(lengths) < 0:
+                raise ValueError("inconsistent cache record")
+            _check_texts(texts, sum(lengths))
+    return count
+
+
+def _check_texts(stored: object, count: int) -> None:
+    if isinstance(stored, str):
+        if (stored.count(_SEPARATOR) + 1 if count else len(stored)) != count:
             raise ValueError("inconsistent cache record")
-        columns[field] = values
-    return list(map(DistortionEntry, *(columns[f] for f in _FIELDS)))
+    elif not (
+        isinstance(stored, list)
+        and len(stored) == count
+        and all(isinstance(text, str) for text in stored)
+    ):
+        raise ValueError("inconsistent cache record")
+
+
+def unpack_column(packed: dict, field: str, name: str) -> list:
+    """One column of packed entries; ``file`` is ``name`` for every entry."""
+    count = packed["count"]
+    if field == "file":
+        return [name] * count
+    kind = _KINDS[field]
+    stored = packed[field]
+    if kind == "float":
+        values = array("d", stored).tolist()
+    elif kind == "int":
+        values = array("q", stored).tolist()
+    elif kind == "str":
+        values = _split(stored, count)
+    else:
+        lengths = array("q", stored[0])
+        if any(length < 0 for length in lengths):
+            raise ValueError("inconsistent cache record")
+        texts = iter(_split(stored[1], sum(lengths)))
+        values = [tuple(islice(texts, length)) for length in lengths]
+    if len(values) != count:
+        raise ValueError("inconsistent cache record")
+    return values
+
+
+def unpack_entries(packed: dict, name: str) -> list[DistortionEntry]:
+    """The entries of packed columns, reported as file ``name``."""
+    columns = [unpack_column(packed, field, name) for field in _FIELDS]
+    return list(map(DistortionEntry, *columns))
 
 
 def pack_metrics(columns: dict[str, list]) -> dict[str, bytes]:
-    """One file's metric columns (see :data:`lensaudit.pipeline.METRIC_COLUMNS`) as bytes."""
+    """One file's metric columns (see :data:`lensaudit.columns.METRIC_COLUMNS`) as bytes."""
     packed = {name: array("d", columns[name]).tobytes() for name in METRIC_FLOAT_COLUMNS}
-    packed.update({name: array("b", columns[name]).tobytes() for name in _METRIC_FLAGS})
+    packed.update({name: array("b", columns[name]).tobytes() for name in METRIC_FLAG_COLUMNS})
     return packed
 
 
-def _unpack_metrics(packed: dict[str, bytes], count: int) -> dict[str, list]:
+def unpack_metrics(packed: dict[str, bytes], count: int) -> dict[str, list]:
+    """Metric columns packed by :func:`pack_metrics`, checked to hold ``count`` values each."""
     columns = {name: array("d", packed[name]).tolist() for name in METRIC_FLOAT_COLUMNS}
-    columns.update({name: array("b", packed[name]).tolist() for name in _METRIC_FLAGS})
+    columns.update({name: array("b", packed[name]).tolist() for name in METRIC_FLAG_COLUMNS})
     if any(len(values) != count for values in columns.values()):
         raise ValueError("inconsistent cache record")
     return columns
 
 
-CachedFile = tuple[list[DistortionEntry], str]
-#: A record: content digest, packed entries, file error, packed metrics or None.
-_Record = tuple[bytes, dict, str, "dict | None"]
+#: A record: content digest, packed entries, file error, packed metrics or None,
+#: the file name rendered rows show, rendered rows by format name.
+_Record = tuple[bytes, dict, str, "dict | None", str, "dict[str, str]"]
 #: What unpacking a damaged or foreign record can raise.
-_RECORD_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
+RECORD_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
+
+
+@dataclass(frozen=True, slots=True)
+class CachedFile:
+    """What the cache holds for one file's content.
+
+    ``packed`` are its entries (see :func:`pack_columns`), ``count`` of them;
+    ``metrics`` their metric columns, or None if not audited yet; ``rows``
+    the rendered rows by format name, for the file name asked for.
+    """
+
+    packed: dict
+    count: int
+    error: str
+    metrics: dict[str, list] | None
+    rows: dict[str, str]
 
 
 def cache_dir() -> Path:
@@ -221,12 +300,15 @@ def cache_dir() -> Path:
 def _valid_record(record: object) -> bool:
     return (
         isinstance(record, tuple)
-        and len(record) == 4
+        and len(record) == 6
         and isinstance(record[0], bytes)
         and len(record[0]) == _DIGEST_SIZE
         and isinstance(record[1], dict)
         and isinstance(record[2], str)
         and (record[3] is None or isinstance(record[3], dict))
+        and isinstance(record[4], str)
+        and isinstance(record[5], dict)
+        and all(isinstance(k, str) and isinstance(v, str) for k, v in record[5].items())
     )
 
 
@@ -298,8 +380,12 @@ def _evict(directory: Path, keep: Path) -> None:
 
 
 class ParseCache:
-    """Parsed entries and metrics of files, keyed by absolute path, valid while
-    the file's content hashes to the stored digest."""
+    """Parsed entries, metrics and rendered rows of files, keyed by absolute path,
+    valid while the file's content hashes to the stored digest.
+
+    Paths are absolute and resolved (``Path.resolve()``); digests are
+    :func:`content_digest` of the bytes the caller read.
+    """
 
     def __init__(self, paths: list[Path], directory: Path | None = None) -> None:
         """The cache of the set of files ``paths`` (in :func:`cache_dir` by default)."""
@@ -324,93 +410,88 @@ class ParseCache:
             except OSError:
                 pass
 
-    def get(self, path: Path, stat: os.stat_result, name: str) -> CachedFile:
-        """Entries and file error of the file at absolute ``path``, reported as ``name``.
+    def knows(self, path: Path) -> bool:
+        """Whether a record of ``path`` is held (so that hashing the file may pay)."""
+        return os.fsencode(path) in self._records
 
-        The file is read (as :func:`lensaudit.loader.read_file` reads it) and
-        hashed; if its content is not the stored one, it is parsed here from
-        those bytes and stored. Raises OSError when the file cannot be read,
-        as reading it without the cache would. ``stat`` is not used: a file's
-        size and time do not prove it unchanged.
+    def find(self, path: Path, digest: bytes, name: str) -> CachedFile | None:
+        """What is stored for ``path`` if its content has ``digest``, else None.
+
+        Rendered rows come only if they were rendered for the file name ``name``.
         """
         key = os.fsencode(path)
         self._seen.add(key)
-        try:
-            data = read_file(path)
-        except OSError:
-            self._forget(key)
-            raise
-        digest = content_digest(data)
         record = self._records.get(key)
-        if record is not None and record[0] == digest:
-            try:
-                return _unpack(record[1], name), record[2]
-            except _RECORD_ERRORS:
-                pass
-        entries, error = read_bytes(data, name)
-        if self.path is not None:
-            try:
-                self._records[key] = (digest, _pack(entries), error, None)
-                self._changed = True
-            except _RECORD_ERRORS:  # entries that cannot be stored are parsed every time
-                self._forget(key)
-        return entries, error
+        if record is None or record[0] != digest:
+            return None
+        try:
+            count = packed_count(record[1])
+            metrics = None if record[3] is None else unpack_metrics(record[3], count)
+        except RECORD_ERRORS:
+            return None
+        return CachedFile(
+            record[1], count, record[2], metrics, record[5] if record[4] == name else {}
+        )
 
-    def put(
-        self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
+    def store(
+        self,
+        path: Path,
+        digest: bytes,
+        packed: dict,
+        error: str,
+        metrics: dict[str, list] | None = None,
+        name: str = "",
+        rows: dict[str, str] | None = None,
     ) -> None:
-        """Store nothing: which bytes ``entries`` were parsed from is not known here.
+        """Keep what was made of ``path``'s content with ``digest``.
 
-        :meth:`get` parses and stores the files it does not find, so this is
-        only called by loaders that parse on their own.
+        ``rows`` (rendered rows by format, for file name ``name``) are added to
+        those stored for the same content and name.
         """
-
-    def _forget(self, key: bytes) -> None:
-        if self._records.pop(key, None) is not None:
+        if self.path is None:
+            return
+        key = os.fsencode(path)
+        self._seen.add(key)
+        try:
+            packed_metrics = None if metrics is None else pack_metrics(metrics)
+        except RECORD_ERRORS:
+            packed_metrics = None
+        old = self._records.get(key)
+        kept_rows: dict[str, str] = {}
+        if old is not None and old[0] == digest and old[4] == name:
+            kept_rows = dict(old[5])
+            if packed_metrics is None:
+                packed_metrics = old[3]
+        kept_rows.update(rows or {})
+        record = (digest, packed, error, packed_metrics, name, kept_rows)
+        if old != record:
+            self._records[key] = record
             self._changed = True
 
-    def audited(self, targets: list[tuple[Path, str]]) -> list[CachedFile] | None:
-        """Entries and errors of every target, if all are unchanged and audited before.
+    def forget(self, path: Path) -> None:
+        """Drop the record of ``path`` (a file that could not be read)."""
+        if self._records.pop(os.fsencode(path), None) is not None:
+            self._changed = True
 
-        Every file is read and hashed; no XML is parsed.
-        """
-        found = []
-        for path, name in targets:
-            try:
-                path = path.resolve()
-                key = os.fsencode(path)
-                record = self._records.get(key)
-                if record is None or record[3] is None:
-                    return None
-                if content_digest(read_file(path)) != record[0]:
-                    return None
-                found.append((_unpack(record[1], name), record[2]))
-            except (OSError, RuntimeError, *_RECORD_ERRORS):
-                return None
-            self._seen.add(key)
-        return found
-
-    def metrics(self, targets: list[tuple[Path, str]]) -> list[dict[str, list]] | None:
-        """The stored metric columns of every target (call after :meth:`audited`)."""
+    def get(self, path: Path, data: bytes, name: str) -> tuple[list[DistortionEntry], str] | None:
+        """Entries and file error of the file at ``path`` whose bytes are ``data``,
+        reported as ``name``; None if that content was not stored."""
+        found = self.find(path, content_digest(data), name)
+        if found is None:
+            return None
         try:
-            return [
-                _unpack_metrics(record[3], record[1]["count"])
-                for record in (self._records[os.fsencode(path.resolve())] for path, _ in targets)
-            ]
-        except (OSError, RuntimeError, *_RECORD_ERRORS):
+            return unpack_entries(found.packed, name), found.error
+        except RECORD_ERRORS:
             return None
 
-    def put_metrics(self, path: Path, columns: dict[str, list]) -> None:
-        """Store the metrics of a file whose entries were given by :meth:`get` in this run."""
+    def put(self, path: Path, data: bytes, entries: list[DistortionEntry], error: str) -> None:
+        """Store the entries and file error parsed from ``data``, the bytes of ``path``."""
         try:
-            key = os.fsencode(path.resolve())
-            record = self._records.get(key)
-            if record is None or any(len(v) != record[1]["count"] for v in columns.values()):
-                return
-            self._records[key] = (*record[:3], pack_metrics(columns))
-            self._changed = True
-        except (OSError, RuntimeError, *_RECORD_ERRORS):
-            pass
+            packed = pack_entries(entries)
+        except RECORD_ERRORS:  # entries that cannot be stored are parsed every time
+            self.forget(path)
+            return
+        self.store(path, content_digest(data), packed, error)
 
     def save(self) -> None:
         """Write the cache if anything changed, then evict; silently skipped when not possible.

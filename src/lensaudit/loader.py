@@ -19,6 +19,7 @@ import stat
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from operator import itemgetter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -176,20 +177,6 @@ def make_parser() -> etree.XMLParser:
     )
 
 
-def _child_text(element: etree._Element, tag: str) -> str | None:
-    """Text content of the last child ``tag`` without a ``lang`` attribute.
-
-    The last one, because that is the one liblensfun keeps when a lens
-    repeats an element (two untranslated ``<model>`` names, say). The whole
-    text content, as any XML reader gives it: ``1<!-- note -->.5`` is 1.5.
-    """
-    text = None
-    for child in element.iterchildren(tag):
-        if child.get("lang") is None:
-            text = _text(child)
-    return text
-
-
 def _text(element: etree._Element) -> str:
     """An element's text content, stripped (comments and PIs left out)."""
     if len(element) == 0:  # no child, comment or PI: the common case
@@ -209,6 +196,18 @@ class _LensContext:
     status: str = STATUS_BAD_VALUE  # the status that problem gives
     # focal -> real focal, from <real-focal-length> elements of the calibration
     real_focals: dict[float, float] = field(default_factory=dict)
+    # maker, lens, mounts, type, crop factor, aspect ratio: the start of each record
+    lens_fields: tuple = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.lens_fields = (
+            self.maker,
+            self.lens,
+            self.mounts,
+            self.type,
+            self.crop_factor,
+            self.aspect_ratio,
+        )
 
     def record(
         self,
@@ -240,6 +239,10 @@ class _LensContext:
         )
 
 
+#: The children of a ``<lens>`` that make its context.
+_LENS_CHILDREN = ("maker", "model", "mount", "type", "cropfactor", "aspect-ratio")
+
+
 def _lens_context(lens: etree._Element | None) -> _LensContext:
     if lens is None:
         return _LensContext(
@@ -253,12 +256,24 @@ def _lens_context(lens: etree._Element | None) -> _LensContext:
             STATUS_NO_LENS,
         )
     problems = []
-    maker = _child_text(lens, "maker") or ""
-    model = _child_text(lens, "model") or ""
-    mounts = tuple(map(_text, lens.iterchildren("mount")))
-    lens_type = _child_text(lens, "type") or DEFAULT_LENS_TYPE
+    # One pass over the children. Of each tag, the text content of the last
+    # child without a ``lang`` attribute: liblensfun keeps the last when a
+    # lens repeats an element (two untranslated <model> names, say). The
+    # whole text content, as any XML reader gives it: 1<!-- note -->.5 is 1.5.
+    texts: dict[str, str] = {}
+    mount_list = []
+    for child in lens.iterchildren(*_LENS_CHILDREN):
+        tag = child.tag
+        if tag == "mount":
+            mount_list.append(_text(child))
+        elif child.get("lang") is None:
+            texts[tag] = _text(child)
+    maker = texts.get("maker") or ""
+    model = texts.get("model") or ""
+    mounts = tuple(mount_list)
+    lens_type = texts.get("type") or DEFAULT_LENS_TYPE
     crop_factor = DEFAULT_CROP_FACTOR
-    crop_text = _child_text(lens, "cropfactor")
+    crop_text = texts.get("cropfactor")
     if crop_text is not None:
         try:
             crop_factor = _positive(parse_number(crop_text), "crop factor")
@@ -266,7 +281,7 @@ def _lens_context(lens: etree._Element | None) -> _LensContext:
             problems.append(f"<cropfactor> {error}")
             crop_factor = NAN
     aspect_ratio = DEFAULT_ASPECT_RATIO
-    aspect_text = _child_text(lens, "aspect-ratio")
+    aspect_text = texts.get("aspect-ratio")
     if aspect_text is not None:
         try:
             aspect_ratio = parse_aspect_ratio(aspect_text)
@@ -358,10 +373,13 @@ def _number(
     return value
 
 
-# Per model: the coefficient attributes, and the record layout of a, b, c, k1, k2
-# with None where the model's coefficients go in order.
-_COEFFICIENT_LAYOUT = {
-    model: [None if n in names else NAN for n in ("a", "b", "c", "k1", "k2")]
+# Per model: the default of each coefficient attribute (a missing one is 0),
+# and which of [focal, real focal, coefficients..., NaN] go to a, b, c, k1, k2.
+_DEFAULTS = {model: ("0",) * len(names) for model, names in MODEL_COEFFICIENTS.items()}
+_LAYOUT = {
+    model: itemgetter(
+        *(2 + names.index(n) if n in names else 2 + len(names) for n in ("a", "b", "c", "k1", "k2"))
+    )
     for model, names in MODEL_COEFFICIENTS.items()
 }
 
@@ -376,10 +394,10 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
     model = get("model")
     names = MODEL_COEFFICIENTS.get(model)  # type: ignore[arg-type]
     focal_text = get("focal")
-    real_text = get("real-focal")
     if names is not None and focal_text is not None and not context.problem:
+        real_text = get("real-focal")
         texts = [focal_text, "1" if real_text is None else real_text]
-        texts += [get(n, "0") for n in names]
+        texts += map(get, names, _DEFAULTS[model])  # type: ignore[index]
         joined = "".join(texts)
         # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
         if joined.isascii() and "_" not in joined:
@@ -387,20 +405,24 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
                 values = list(map(float, texts))
             except ValueError:
                 values = None
-            total = sum(values) if values else NAN
-            if total - total == 0 and values[0] > 0 and values[1] > 0:  # all finite
-                focal = values[0]
-                if real_text is None:
-                    real_focal = context.real_focals.get(focal, NAN)
-                else:
-                    real_focal = values[1]
-                coefficients = iter(values[2:])
-                layout = [
-                    next(coefficients) if v is None else v for v in _COEFFICIENT_LAYOUT[model]
-                ]  # type: ignore[index]
-                return context.record(
-                    name, element.sourceline or 0, model, focal, real_focal, layout
-                )  # type: ignore[arg-type]
+            if values is not None:
+                total = sum(values)
+                if total - total == 0 and values[0] > 0 and values[1] > 0:  # all finite
+                    focal = values[0]
+                    if real_text is None:
+                        real_focal = context.real_focals.get(focal, NAN)
+                    else:
+                        real_focal = values[1]
+                    values.append(NAN)
+                    return DistortionEntry(
+                        name,
+                        element.sourceline or 0,
+                        *context.lens_fields,
+                        model,  # type: ignore[arg-type]
+                        focal,
+                        real_focal,
+                        *_LAYOUT[model](values),  # type: ignore[index]
+                    )
     return _checked_entry(element, name, context)
 
 
@@ -445,8 +467,8 @@ def entries_from_tree(root: etree._Element, name: str) -> Iterator[DistortionEnt
     for element in root.iter("lens", "calibration", "distortion"):
         tag = element.tag
         if tag == "distortion":
-            parent = element.getparent()
-            if parent is not calibration or (lens is None or parent.getparent() is not lens):
+            # calibration is only ever set to a child of the current lens.
+            if calibration is None or lens is None or element.getparent() is not calibration:
                 yield _entry(element, name, _context_of(element))
             else:
                 yield _entry(element, name, context)
@@ -634,15 +656,18 @@ def read_file(path: str | os.PathLike[str]) -> bytes:
 
 
 class EntryCache(Protocol):
-    """Where :func:`load_files` may find files parsed before (see lensaudit.cache)."""
+    """Where :func:`load_files` may find files parsed before (see lensaudit.cache).
+
+    Both methods are given the bytes :func:`load_files` read, so that a file
+    is read once and what is stored was parsed from the very bytes it is
+    stored under.
+    """
 
     def get(
-        self, path: Path, stat: os.stat_result, name: str
+        self, path: Path, data: bytes, name: str
     ) -> tuple[list[DistortionEntry], str] | None: ...
 
-    def put(
-        self, path: Path, stat: os.stat_result, entries: list[DistortionEntry], error: str
-    ) -> None: ...
+    def put(self, path: Path, data: bytes, entries: list[DistortionEntry], error: str) -> None: ...
 
 
 def expand(
@@ -732,25 +757,40 @@ def load_files_in_background(
     return result
 
 
+def read_regular_file(path: Path) -> bytes:
+    """The bytes of the database file at ``path``, as :func:`load_files` reads it.
+
+    Raises ``OSError`` when it cannot be read or is not a regular file (which
+    is not even opened).
+    """
+    if not stat.S_ISREG(path.stat().st_mode):
+        raise OSError(0, "not a regular file")
+    return read_file(path)
+
+
+def unreadable_file(name: str, error: OSError) -> tuple[list[DistortionEntry], str]:
+    """The record and file error of a file that could not be read."""
+    message = f"cannot read file: {_reason(error)}"
+    return [_error_entry(name, 0, STATUS_UNREADABLE, message)], message
+
+
 def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = None) -> LoadResult:
     """Load (path, display name) pairs; unreadable files become records."""
     result = LoadResult()
     for path, name in targets:
         path = path.resolve()
         try:
-            info = path.stat()
-            if not stat.S_ISREG(info.st_mode):
-                raise OSError(0, "not a regular file")
-            cached = cache.get(path, info, name) if cache is not None else None
+            data = read_regular_file(path)
+        except OSError as os_error:
+            entries, error = unreadable_file(name, os_error)
+        else:
+            cached = cache.get(path, data, name) if cache is not None else None
             if cached is not None:
                 entries, error = cached
             else:
-                entries, error = read_bytes(read_file(path), name)
+                entries, error = read_bytes(data, name)
                 if cache is not None:
-                    cache.put(path, info, entries, error)
-        except OSError as os_error:
-            error = f"cannot read file: {_reason(os_error)}"
-            entries = [_error_entry(name, 0, STATUS_UNREADABLE, error)]
+                    cache.put(path, data, entries, error)
         result.files.append(SourceFile(name, path, len(entries), error))
         result.entries.extend(entries)
     return result

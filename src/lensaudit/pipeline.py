@@ -2,103 +2,133 @@
 
 :func:`run` gives an :class:`Audit`, plain columns that the output formats
 and :func:`lensaudit.audit` (a pandas DataFrame) are made from.
+
+An audit of a database is held file by file as columns (the packed form of
+:mod:`lensaudit.cache`); entry objects, numpy arrays and rendered rows are
+made from them when first asked for. That is what lets an unchanged
+database be scanned from the cache without numpy, and a new one be parsed in
+worker processes (:mod:`lensaudit.workers`) while numpy is imported.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
-from functools import cached_property
+from collections.abc import Collection, Iterator, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property, partial
 from operator import attrgetter
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import database, loader
+from .columns import (
+    COLUMNS,
+    ENTRY_COLUMNS,
+    FLOAT_COLUMNS,
+    LEADING_COLUMNS,
+    METRIC_COLUMNS,
+    METRIC_FLOAT_COLUMNS,
+    TAIL_NAMES,
+    TRAILING_COLUMNS,
+    format_float,
+    format_floats,
+)
 from .loader import STATUS_OK, DistortionEntry, SourceFile
 
 # numpy (and so the metrics) is imported where it is first needed, so that
-# run() can start reading the database while numpy is still being imported.
+# run() can parse the database while numpy is still being imported, and
+# scan an unchanged one without it.
 if TYPE_CHECKING:
     import numpy as np
     import pandas
 
     from . import metrics
+    from .cache import ParseCache
     from .summary import Summary
+    from .workers import Job
 
-#: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
-COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "real_focal",
-    "a",
-    "b",
-    "c",
-    "k1",
-    "k2",
-    "r_max",
-    "d_max",
-    "tail",
-    "r_corner",
-    "r_normalized",
-    "r_corner_paper",
-    "r_normalized_paper",
-    "folds_in_image",
-    "status",
-    "message",
-)
+# The column names and float formatting live in lensaudit.columns; they are
+# also found here, where the modules that write columns have long taken them.
+__all__ = [
+    "COLUMNS",
+    "ENTRY_COLUMNS",
+    "FLOAT_COLUMNS",
+    "METRIC_COLUMNS",
+    "METRIC_FLOAT_COLUMNS",
+    "Audit",
+    "FileColumns",
+    "audit_entries",
+    "format_float",
+    "format_floats",
+    "run",
+]
 
-#: Columns computed by the audit; the others are read from the database.
-METRIC_COLUMNS = (
-    "r_max", "d_max", "tail", "r_corner", "r_normalized", "r_corner_paper",
-    "r_normalized_paper", "folds_in_image",
-)  # fmt: skip
-ENTRY_COLUMNS = tuple(name for name in COLUMNS if name not in METRIC_COLUMNS)
-#: Columns holding numbers (written as shortest round-trip floats, inf, or empty).
-FLOAT_COLUMNS = frozenset(COLUMNS) - {
-    "file", "line", "maker", "lens", "type", "model", "tail", "folds_in_image", "status",
-    "message",
-}  # fmt: skip
+#: The entry columns a row format renders (around the metrics).
+_ROW_ENTRY_COLUMNS = LEADING_COLUMNS + TRAILING_COLUMNS
 
-_TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}  # metrics.TAIL_POSITIVE, ...
-#: The metric columns that hold floats (the others: tail, folds_in_image).
-METRIC_FLOAT_COLUMNS = tuple(
-    name for name in METRIC_COLUMNS if name not in ("tail", "folds_in_image")
-)
+
+@dataclass(slots=True)
+class FileColumns:
+    """One file of an audit: its entries as packed columns (see
+    :func:`lensaudit.cache.pack_columns`), ``count`` of them, and what row
+    formats rendered of them, by format name: whole ``rows``, or each row's
+    text before and after its metrics (``row_texts``, rendered while parsing).
+    """
+
+    packed: dict
+    count: int
+    rows: dict[str, str] = field(default_factory=dict)
+    row_texts: dict[str, tuple[list[str], list[str]]] = field(default_factory=dict)
 
 
 class Audit:
     """The audit of one database: its source, files, entries and metrics.
 
-    Metrics come as :class:`lensaudit.metrics.Metrics` (numpy arrays), or as
-    plain lists per metric column when read back from the cache; either form
-    gives the other on demand.
+    Entries come as :class:`~lensaudit.loader.DistortionEntry` objects, or
+    file by file as packed columns (``parts``, one :class:`FileColumns` per
+    file); metrics as :class:`lensaudit.metrics.Metrics` (numpy arrays), or
+    as plain lists per metric column. Each form gives the others on demand.
     """
 
     def __init__(
         self,
         source: database.DatabaseSource,
         files: list[SourceFile],
-        entries: list[DistortionEntry],
+        entries: list[DistortionEntry] | None = None,
         metrics: metrics.Metrics | None = None,
         metric_columns: dict[str, list] | None = None,
+        *,
+        parts: list[FileColumns] | None = None,
     ) -> None:
         if metrics is None and metric_columns is None:
             raise ValueError("an Audit needs its metrics")
+        if entries is None and parts is None:
+            raise ValueError("an Audit needs its entries")
         self.source = source
         self.files = files
-        self.entries = entries
+        self._parts = parts if entries is None else None
         self._metric_columns = metric_columns
+        self._entry_columns: dict[str, list] = {}
+        if entries is not None:
+            self.__dict__["entries"] = entries
         if metrics is not None:
             self.__dict__["metrics"] = metrics
 
     def __len__(self) -> int:
-        return len(self.entries)
+        if self._parts is None:
+            return len(self.entries)
+        return sum(part.count for part in self._parts)
+
+    @cached_property
+    def entries(self) -> list[DistortionEntry]:
+        """The entries, one object each."""
+        from .cache import unpack_entries
+
+        assert self._parts is not None
+        entries: list[DistortionEntry] = []
+        for file, part in zip(self.files, self._parts, strict=True):
+            entries += unpack_entries(part.packed, file.name)
+        return entries
 
     @cached_property
     def metrics(self) -> metrics.Metrics:
@@ -118,12 +148,7 @@ class Audit:
     def metric_columns(self) -> dict[str, list]:
         """The metrics as lists: floats, ``tail`` as -1/0/1, ``folds_in_image`` as 0/1."""
         if self._metric_columns is None:
-            m = self.metrics
-            self._metric_columns = {
-                name: getattr(m, name).tolist() for name in METRIC_FLOAT_COLUMNS
-            }
-            self._metric_columns["tail"] = m.tail.tolist()
-            self._metric_columns["folds_in_image"] = m.folds_in_image.astype(int).tolist()
+            self._metric_columns = _metric_lists(self.metrics)
         return self._metric_columns
 
     @cached_property
@@ -131,7 +156,22 @@ class Audit:
         """Boolean mask of entries with status ``ok``."""
         import numpy as np
 
-        return np.array(list(map(attrgetter("status"), self.entries)), dtype=object) == STATUS_OK
+        return np.array(self._entry_column("status"), dtype=object) == STATUS_OK
+
+    def _entry_column(self, name: str) -> list[Any]:
+        """An entry column, kept: callers must not change it."""
+        values = self._entry_columns.get(name)
+        if values is None:
+            if self._parts is None:
+                values = list(map(attrgetter(name), self.entries))
+            else:
+                from .cache import unpack_column
+
+                values = []
+                for file, part in zip(self.files, self._parts, strict=True):
+                    values += unpack_column(part.packed, name, file.name)
+            self._entry_columns[name] = values
+        return values
 
     def column(self, name: str) -> list[Any]:
         """One output column as a Python list (floats NaN where empty).
@@ -140,12 +180,12 @@ class Audit:
         or None for entries that were not audited.
         """
         if name in ENTRY_COLUMNS:
-            return list(map(attrgetter(name), self.entries))
+            return list(self._entry_column(name))
         values = self.metric_columns()[name]
         if name == "tail":
-            return [_TAIL_NAMES[t] for t in values]
+            return [TAIL_NAMES[t] for t in values]
         if name == "folds_in_image":
-            statuses = map(attrgetter("status"), self.entries)
+            statuses = self._entry_column("status")
             return [
                 bool(f) if s == STATUS_OK else None for f, s in zip(values, statuses, strict=True)
             ]
@@ -159,6 +199,41 @@ class Audit:
         """One dict per entry, keys in :data:`COLUMNS` order."""
         columns = self.columns()
         return [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)]
+
+    def rows(self, format_name: str) -> Iterator[str]:
+        """The entries rendered by a row format ("csv", "json"; see
+        :mod:`lensaudit.formats`), one text per file, in order.
+
+        Rows come from the cache or from :func:`run` when it rendered them;
+        others are rendered here and kept.
+        """
+        from .formats import row_format
+
+        module = row_format(format_name)
+        metrics = self.metric_columns()
+        statuses = self._entry_column("status")
+        if self._parts is None:
+            leading, trailing = module.row_texts(
+                {name: self._entry_column(name) for name in _ROW_ENTRY_COLUMNS}
+            )
+            yield module.rows(leading, trailing, metrics, statuses)
+            return
+        start = 0
+        for file, part in zip(self.files, self._parts, strict=True):
+            end = start + part.count
+            text = part.rows.get(format_name)
+            if text is None:
+                texts = part.row_texts.pop(format_name, None)
+                if texts is None:
+                    texts = module.row_texts(_unpacked(part, file.name, _ROW_ENTRY_COLUMNS))
+                text = module.rows(
+                    *texts,
+                    {name: values[start:end] for name, values in metrics.items()},
+                    statuses[start:end],
+                )
+                part.rows[format_name] = text
+            yield text
+            start = end
 
     @cached_property
     def summary(self) -> Summary:
@@ -176,61 +251,198 @@ class Audit:
         return frame
 
 
+def _unpacked(part: FileColumns, name: str, fields: Sequence[str]) -> dict[str, list]:
+    from .cache import unpack_column
+
+    return {field: unpack_column(part.packed, field, name) for field in fields}
+
+
+def _metric_lists(m: metrics.Metrics) -> dict[str, list]:
+    columns = {name: getattr(m, name).tolist() for name in METRIC_FLOAT_COLUMNS}
+    columns["tail"] = m.tail.tolist()
+    columns["folds_in_image"] = m.folds_in_image.astype(int).tolist()
+    return columns
+
+
 def run(
     paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None,
     *,
     cache: bool = False,
+    formats: Collection[str] = (),
 ) -> Audit:
     """Audit a Lensfun database: directories and/or XML files, or the bundled one.
 
-    With ``cache``, files parsed by an earlier run and unchanged since are
-    read from lensaudit's parse cache (see :mod:`lensaudit.cache`). Raises
-    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all;
-    problems inside files become entries with a status instead.
+    With ``cache``, files audited by an earlier run and unchanged since are
+    read from lensaudit's parse cache (see :mod:`lensaudit.cache`), and the
+    others are stored there. ``formats`` names the row formats ("csv",
+    "json") whose rows are wanted: they are rendered as files are parsed, and
+    cached with them. Raises :class:`lensaudit.loader.LoadError` when the
+    paths cannot be read at all; problems inside files become entries with a
+    status instead.
     """
+    from .formats import ROW_FORMATS
+
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     source = database.resolve(list(paths) if paths else None)
     targets = loader.expand(source.paths)
-    parse_cache = None
+    store = None
     if cache:
         from .cache import ParseCache
 
-        parse_cache = ParseCache([path for path, _ in targets])
-        audited = parse_cache.audited(targets)
-        stored = parse_cache.metrics(targets) if audited is not None else None
-        if audited is not None and stored is not None:
-            # Nothing changed since the last audit: no parsing, no numpy.
-            return _from_cache(source, targets, audited, stored)
-    # libxml2 parses without holding the GIL: read the files while numpy imports.
-    pending = loader.load_files_in_background(targets, parse_cache)
-    from . import metrics  # noqa: F401  (the import is the point)
+        store = ParseCache([path for path, _ in targets])
+    wanted = tuple(name for name in ROW_FORMATS if name in formats)
+    return _audit_files(source, targets, store, wanted)
 
-    loaded = pending()
-    audit = audit_entries(loaded.entries, source, loaded.files)
-    if parse_cache is not None:
-        columns = audit.metric_columns()
+
+def _audit_files(
+    source: database.DatabaseSource,
+    targets: list[tuple[Path, str]],
+    store: ParseCache | None,
+    formats: tuple[str, ...],
+) -> Audit:
+    """The audit of ``targets``: from the cache ``store`` where it knows the
+    content, parsed (in workers, while numpy imports) where not."""
+    from .workers import Job, parse_all
+
+    size = len(targets)
+    files: list[SourceFile] = []
+    parts: list[FileColumns] = []
+    metrics: list[dict[str, list] | None] = [None] * size
+    digests: list[bytes | None] = [None] * size
+    cached_rows: list[frozenset[str]] = [frozenset()] * size
+    jobs: list[tuple[int, Job]] = []
+    for index, (path, name) in enumerate(targets):
+        path = path.resolve()
+        data = None
+        if store is not None and store.knows(path):
+            from .cache import content_digest
+
+            try:
+                data = loader.read_regular_file(path)
+            except OSError:  # parsed below, where reading it fails again and is reported
+                data = None
+            else:
+                digest = content_digest(data)
+                found = store.find(path, digest, name)
+                if found is not None:
+                    files.append(SourceFile(name, path, found.count, found.error))
+                    parts.append(FileColumns(found.packed, found.count, dict(found.rows)))
+                    metrics[index] = found.metrics
+                    digests[index] = digest
+                    cached_rows[index] = frozenset(found.rows)
+                    continue
+        files.append(SourceFile(name, path, 0))  # placeholders, replaced below
+        parts.append(FileColumns({}, 0))
+        jobs.append((index, Job(path, name, data)))
+
+    if jobs:
+        results = parse_all([job for _, job in jobs], partial(_parse, formats=formats), _metrics)
+        for (index, job), (digest, packed, count, error, row_texts) in zip(
+            jobs, results, strict=True
+        ):
+            files[index] = SourceFile(job.name, job.path, count, error)
+            parts[index] = FileColumns(packed, count, row_texts=row_texts)
+            digests[index] = digest
+
+    computed = None
+    missing = [index for index in range(size) if metrics[index] is None]
+    if missing:
+        computed = _compute([parts[index] for index in missing])
         start = 0
-        for file in loaded.files:
-            end = start + file.entries
-            parse_cache.put_metrics(file.path, {k: v[start:end] for k, v in columns.items()})
+        lists = _metric_lists(computed)
+        for index in missing:
+            end = start + parts[index].count
+            metrics[index] = {name: values[start:end] for name, values in lists.items()}
             start = end
-        parse_cache.save()
+    columns: dict[str, list] = {name: [] for name in METRIC_COLUMNS}
+    for file_metrics in metrics:
+        assert file_metrics is not None
+        for name, values in columns.items():
+            values += file_metrics[name]
+    audit = Audit(
+        source,
+        files,
+        metrics=computed if len(missing) == size else None,
+        metric_columns=columns,
+        parts=parts,
+    )
+    for name in formats:
+        for _ in audit.rows(name):  # rendered now, to be cached
+            pass
+    if store is not None:
+        audited_now = set(missing)
+        for index, (file, part) in enumerate(zip(files, parts, strict=True)):
+            digest = digests[index]
+            new_rows = {k: v for k, v in part.rows.items() if k not in cached_rows[index]}
+            if digest is not None and (index in audited_now or new_rows):
+                store.store(
+                    file.path, digest, part.packed, file.error, metrics[index], file.name, new_rows
+                )
+        store.save()
     return audit
 
 
-def _from_cache(source, targets, audited, stored) -> Audit:
-    """An audit put together from the cache's entries and metrics, file by file."""
-    files, entries = [], []
-    columns: dict[str, list] = {}
-    for (path, name), (file_entries, error), file_columns in zip(
-        targets, audited, stored, strict=True
-    ):
-        files.append(SourceFile(name, path.resolve(), len(file_entries), error))
-        entries.extend(file_entries)
-        for key, values in file_columns.items():
-            columns.setdefault(key, []).extend(values)
-    return Audit(source, files, entries, metric_columns=columns)
+def _metrics() -> None:
+    """Import the metrics, and with them numpy: what the caller does while files are parsed."""
+    from . import metrics  # noqa: F401  (the import is the point)
+
+
+def _parse(job: Job, formats: tuple[str, ...]) -> tuple:
+    """What the audit needs of one file: the digest of the bytes parsed (None if
+    unreadable), packed entries, their count, the file error, and each row
+    format's texts of every row before and after its metrics."""
+    from .cache import content_digest, entry_columns, pack_columns
+
+    try:
+        data = job.data if job.data is not None else loader.read_regular_file(job.path)
+    except OSError as os_error:
+        entries, error = loader.unreadable_file(job.name, os_error)
+        digest = None
+    else:
+        entries, error = loader.read_bytes(data, job.name)
+        digest = content_digest(data)
+    columns = entry_columns(entries)
+    packed = pack_columns(columns, len(entries))
+    row_texts = {}
+    if formats:
+        from .formats import row_format
+
+        columns["file"] = [job.name] * len(entries)
+        row_texts = {name: row_format(name).row_texts(columns) for name in formats}
+    return digest, packed, len(entries), error, row_texts
+
+
+def _compute(parts: list[FileColumns]) -> metrics.Metrics:
+    """The metrics of the entries of ``parts``, in order (as :func:`audit_entries`)."""
+    import numpy as np
+
+    from . import metrics
+    from .cache import unpack_column
+
+    def floats(name: str) -> np.ndarray:
+        return np.frombuffer(b"".join(p.packed[name] for p in parts), dtype=np.float64).copy()
+
+    def texts(name: str) -> list[str]:
+        values: list[str] = []
+        for part in parts:
+            values += unpack_column(part.packed, name, "")
+        return values
+
+    audited = np.array(texts("status"), dtype=object) == STATUS_OK
+    return metrics.compute(
+        texts("model"),
+        floats("a"),
+        floats("b"),
+        floats("c"),
+        floats("k1"),
+        floats("k2"),
+        floats("crop_factor"),
+        floats("aspect_ratio"),
+        floats("focal"),
+        audited,
+        list(map(metrics.is_circular_fisheye, texts("lens"), texts("type"))),
+    )
 
 
 def audit_entries(
@@ -265,17 +477,3 @@ def audit_entries(
     if source is None:
         source = database.DatabaseSource((), "entries given in memory")
     return Audit(source, files or [], entries, result)
-
-
-def format_float(value: float) -> str:
-    """A float as the text formats write it: shortest round-trip, inf, or empty for NaN."""
-    text = repr(value)
-    return "" if text == "nan" else text
-
-
-def format_floats(values: list[float]) -> list[str]:
-    """:func:`format_float` over a list, at C speed for the common case."""
-    texts = list(map(repr, values))
-    if "nan" in texts:
-        texts = ["" if text == "nan" else text for text in texts]
-    return texts

@@ -6,13 +6,12 @@ Table 2 counts the finite ones by the sign of D(r) beyond r_max.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from .loader import MODEL_COEFFICIENTS
+from .loader import MODEL_COEFFICIENTS, STATUS_OK
 
 if TYPE_CHECKING:
     from .pipeline import Audit
@@ -111,43 +110,58 @@ class Summary:
 
 
 def summarize(audit: Audit) -> Summary:
-    """Tables 1 and 2, status counts and the folding entries of an audit."""
-    entries = audit.entries
-    m = audit.metrics
-    audited = audit.audited
-    model = np.array([e.model for e in entries], dtype=object)
-    rectilinear = np.array([e.type == "rectilinear" for e in entries], dtype=bool)
-    finite = audited & np.isfinite(m.r_max)
-    rows = []
-    for name in MODELS:
-        mine = audited & (model == name)
-        rows.append(_counts(name, mine, finite, m.tail))
-    rows.append(_counts(TOTAL, audited, finite, m.tail))
-    folding = np.flatnonzero(m.folds_in_image)
-    folding = folding[np.argsort(m.r_normalized[folding], kind="stable")]
-    with np.errstate(invalid="ignore"):
-        paper_folds = finite & rectilinear & (m.r_normalized_paper < 1)
-    statuses = Counter(e.status for e in entries)
-    not_audited = Counter(e.model or "(none)" for e in entries if e.status != "ok")
-    return Summary(
-        entries=len(entries),
-        audited=int(audited.sum()),
-        files=len(audit.files),
-        statuses=dict(sorted(statuses.items(), key=lambda kv: (kv[0] != "ok", kv[0]))),
-        rows=rows,
-        folding=folding.tolist(),
-        folding_rectilinear=int((m.folds_in_image & rectilinear).sum()),
-        folding_paper_units_rectilinear=int(paper_folds.sum()),
-        models_not_audited=dict(not_audited),
+    """Tables 1 and 2, status counts and the folding entries of an audit.
+
+    Counted from the audit's columns in plain Python: a summary needs
+    neither the entries as objects nor numpy.
+    """
+    models = audit.column("model")
+    types = audit.column("type")
+    statuses = audit.column("status")
+    metrics = audit.metric_columns()
+    r_max, tail = metrics["r_max"], metrics["tail"]
+    folds, r_normalized = metrics["folds_in_image"], metrics["r_normalized"]
+    r_normalized_paper = metrics["r_normalized_paper"]
+    isfinite = math.isfinite
+    # model name -> [finite, infinite, positive, negative] over audited entries
+    counts = {name: [0, 0, 0, 0] for name in (*MODELS, TOTAL)}
+    audited = folding_rectilinear = paper_folds = 0
+    folding = []
+    for index, (model, status) in enumerate(zip(models, statuses, strict=True)):
+        rectilinear = types[index] == "rectilinear"
+        if folds[index]:
+            folding.append(index)
+            folding_rectilinear += rectilinear
+        if status != STATUS_OK:
+            continue
+        audited += 1
+        finite = isfinite(r_max[index])
+        if finite:
+            sign = tail[index]
+            row = (1, 0, sign > 0, sign < 0)
+            paper_folds += rectilinear and r_normalized_paper[index] < 1
+        else:
+            row = (0, 1, 0, 0)
+        for key in (model, TOTAL) if model in counts and model != TOTAL else (TOTAL,):
+            tally = counts[key]
+            for position, value in enumerate(row):
+                tally[position] += value
+    # By r_normalized, ties in entry order; NaN (never a fold, but safe) last.
+    folding.sort(key=lambda i: (r_normalized[i] != r_normalized[i], r_normalized[i]))
+    statuses_found = Counter(statuses)
+    not_audited = Counter(
+        model or "(none)"
+        for model, status in zip(models, statuses, strict=True)
+        if status != STATUS_OK
     )
-
-
-def _counts(name: str, mask: np.ndarray, finite: np.ndarray, tail: np.ndarray) -> ModelCounts:
-    fin = mask & finite
-    return ModelCounts(
-        model=name,
-        finite=int(fin.sum()),
-        infinite=int((mask & ~finite).sum()),
-        positive=int((fin & (tail > 0)).sum()),
-        negative=int((fin & (tail < 0)).sum()),
+    return Summary(
+        entries=len(statuses),
+        audited=audited,
+        files=len(audit.files),
+        statuses=dict(sorted(statuses_found.items(), key=lambda kv: (kv[0] != "ok", kv[0]))),
+        rows=[ModelCounts(name, *map(int, counts[name])) for name in (*MODELS, TOTAL)],
+        folding=folding,
+        folding_rectilinear=folding_rectilinear,
+        folding_paper_units_rectilinear=paper_folds,
+        models_not_audited=dict(not_audited),
     )

@@ -37,8 +37,9 @@ KIND_NAMES = ("distortion", "vignetting", "tca")
     "--cache/--no-cache",
     default=True,
     show_default=True,
-    help="Reuse files parsed by an earlier run when unchanged (size and time); "
-    "the cache is in $LENSAUDIT_CACHE_DIR or ~/.cache/lensaudit.",
+    help="Reuse what an earlier run made of files whose content is unchanged (the cache "
+    "is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR or "
+    "~/.cache/lensaudit.",
 )
 def scan(
     paths: tuple[Path, ...], output_format: str, kind: str, output: Path | None, cache: bool
@@ -88,14 +89,29 @@ def scan(
     from ..formats import writer
     from ..pipeline import run
 
+    _single_blas_thread()
     try:
-        audit = run(list(paths) or None, cache=cache)
+        audit = run(list(paths) or None, cache=cache, formats=(output_format,))
     except LoadError as error:
         fail(str(error))
     if audit.files and all(f.error for f in audit.files):
         fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
     with output_stream(output) as stream:
         writer(output_format)(audit, stream)
+
+
+def _single_blas_thread() -> None:
+    """Ask numpy's BLAS, if this process is the one to load it, for one thread.
+
+    The audit does no linear algebra, and starting a BLAS thread pool makes
+    importing numpy slower (much slower on a busy machine). Only this
+    process is affected, and only when the user has not chosen.
+    """
+    import os
+    import sys
+
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _scan_calibrations(

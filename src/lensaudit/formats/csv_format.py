@@ -1,8 +1,14 @@
-"""CSV: one row per distortion entry, columns as :data:`lensaudit.pipeline.COLUMNS`.
+"""CSV: one row per distortion entry, columns as :data:`lensaudit.columns.COLUMNS`.
 
 Floats are written in shortest round-trip form, ``inf`` for infinite values
 and empty for values that do not apply; booleans as ``true``/``false``. Text
 is quoted as RFC 4180 says (only where it holds a comma, quote or line break).
+
+Rows are rendered file by file, in two steps: the text an entry gives
+(:func:`row_texts`, which needs no metrics, so that it can be done while
+files are still being parsed), then whole rows with the metrics
+(:func:`rows`). The audit keeps each file's rows, and the parse cache stores
+them, so that an unchanged database is written by concatenation.
 """
 
 from __future__ import annotations
@@ -10,13 +16,23 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, TextIO
 
-from ..pipeline import COLUMNS, FLOAT_COLUMNS, format_floats
+from ..columns import (
+    COLUMNS,
+    FLOAT_COLUMNS,
+    LEADING_COLUMNS,
+    METRIC_COLUMNS,
+    TAIL_NAMES,
+    TRAILING_COLUMNS,
+    format_floats,
+)
+from ..loader import STATUS_OK
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
 
 _BOOLEAN = {True: "true", False: "false", None: ""}
 _NEEDS_QUOTES = re.compile(r'[,"\r\n]')
+HEADER = ",".join(COLUMNS) + "\n"
 
 
 def _quoted(text: str) -> str:
@@ -31,27 +47,56 @@ def text_column(values: list) -> list[str]:
     return texts
 
 
-#: Rows formatted at a time: the text of a whole database at once costs more
-#: memory, and in a fresh process memory costs time.
-CHUNK_ROWS = 256
-
-
 def _fields(name: str, values: list) -> list[str]:
     if name in FLOAT_COLUMNS:
         return format_floats(values)
-    if name == "folds_in_image":
-        return [_BOOLEAN[v] for v in values]
     if name == "line":
         return list(map(str, values))
     return text_column(values)
 
 
+def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
+    """Each row's text before its metrics and after them, from the entry columns
+    (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
+    leading = [_fields(name, columns[name]) for name in LEADING_COLUMNS]
+    trailing = [_fields(name, columns[name]) for name in TRAILING_COLUMNS]
+    return list(map(",".join, zip(*leading, strict=True))), list(
+        map(",".join, zip(*trailing, strict=True))
+    )
+
+
+def rows(
+    leading: list[str], trailing: list[str], metrics: dict[str, list], statuses: list[str]
+) -> str:
+    """Whole rows, each ending in a line break: ``leading`` and ``trailing`` from
+    :func:`row_texts`, the metric columns of the same entries, and their statuses
+    (an entry that was not audited has no ``folds_in_image``)."""
+    if not leading:
+        return ""
+    fields: list[list[str]] = [leading]
+    for name in METRIC_COLUMNS:
+        values = metrics[name]
+        if name == "tail":
+            fields.append(list(map(TAIL_NAMES.__getitem__, values)))
+        elif name == "folds_in_image":
+            fields.append(
+                [
+                    _BOOLEAN[bool(fold)] if status == STATUS_OK else ""
+                    for fold, status in zip(values, statuses, strict=True)
+                ]
+            )
+        else:
+            fields.append(format_floats(values))
+    fields.append(trailing)
+    return "\n".join(map(",".join, zip(*fields, strict=True))) + "\n"
+
+
+def join(texts: list[str]) -> str:
+    """The rows of several files as one text."""
+    return "".join(texts)
+
+
 def write(audit: Audit, stream: TextIO) -> None:
-    columns = [audit.column(name) for name in COLUMNS]
-    stream.write(",".join(COLUMNS) + "\n")
-    for start in range(0, len(audit), CHUNK_ROWS):
-        fields = [
-            _fields(name, values[start : start + CHUNK_ROWS])
-            for name, values in zip(COLUMNS, columns, strict=True)
-        ]
-        stream.write("\n".join(map(",".join, zip(*fields, strict=True))) + "\n")
+    stream.write(HEADER)
+    for text in audit.rows("csv"):
+        stream.write(text)

@@ -2,19 +2,42 @@
 
 Non-finite floats are written as the strings ``"inf"``/``"-inf"`` and values
 that do not apply as ``null``, so that the output is strict JSON.
+
+The text is exactly what ``json.dump(document(audit), stream, indent=1)``
+writes, but the entries are rendered column by column and file by file, as
+the CSV rows are (see :mod:`lensaudit.formats.csv_format`): per entry, the
+text before its metrics (:func:`row_texts`), then whole entries
+(:func:`rows`), which the audit keeps and the parse cache stores.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from json.encoder import encode_basestring_ascii
 from typing import TYPE_CHECKING, Any, TextIO
 
 from .. import __version__
-from ..pipeline import COLUMNS, FLOAT_COLUMNS
+from ..columns import (
+    COLUMNS,
+    FLOAT_COLUMNS,
+    LEADING_COLUMNS,
+    METRIC_COLUMNS,
+    TAIL_NAMES,
+    TRAILING_COLUMNS,
+)
+from ..loader import STATUS_OK
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
+
+# An entry is a dict two levels down the document: with indent=1, its braces
+# are indented by 2 and its keys by 3; items are separated by ",\n".
+_OPEN, _CLOSE, _KEY_INDENT = "  {\n", "\n  }", "   "
+_SPECIAL_FLOATS = {"nan": "null", "inf": '"inf"', "-inf": '"-inf"'}
+_TAILS = {sign: encode_basestring_ascii(name) for sign, name in TAIL_NAMES.items()}
+_BOOLEAN = {True: "true", False: "false"}
+_ENTRIES_END = '"entries": []\n}'
 
 
 def _json_float(value: float) -> float | str | None:
@@ -35,12 +58,75 @@ def _clean(value: Any) -> Any:
     return value
 
 
-def document(audit: Audit) -> dict[str, Any]:
-    """The JSON document as Python data."""
-    columns = audit.columns()
-    for name in FLOAT_COLUMNS:
-        columns[name] = [_json_float(v) for v in columns[name]]
-    entries = [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)]
+def _floats(values: list[float]) -> list[str]:
+    # float.__repr__ is what json writes for a finite float.
+    texts = list(map(repr, values))
+    if "nan" in texts or "inf" in texts or "-inf" in texts:
+        texts = [_SPECIAL_FLOATS.get(text, text) for text in texts]
+    return texts
+
+
+def _values(name: str, values: list) -> list[str]:
+    """One entry column as JSON values."""
+    if name in FLOAT_COLUMNS:
+        return _floats(values)
+    if name == "line":
+        return list(map(int.__repr__, values))
+    return list(map(encode_basestring_ascii, values))
+
+
+def _template(names: tuple[str, ...], first: bool, last: bool) -> str:
+    """The text of a run of an entry's items, with ``%s`` where the values go."""
+    items = ",\n".join(f"{_KEY_INDENT}{encode_basestring_ascii(name)}: %s" for name in names)
+    return (_OPEN if first else "") + items + (_CLOSE if last else ",\n")
+
+
+_LEADING = _template(LEADING_COLUMNS, first=True, last=False)
+_METRICS = _template(METRIC_COLUMNS, first=False, last=False)
+_TRAILING = _template(TRAILING_COLUMNS, first=False, last=True)
+
+
+def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
+    """Each entry's text before its metrics and after them, from the entry columns
+    (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
+    leading = [_values(name, columns[name]) for name in LEADING_COLUMNS]
+    trailing = [_values(name, columns[name]) for name in TRAILING_COLUMNS]
+    return (
+        list(map(_LEADING.__mod__, zip(*leading, strict=True))),
+        list(map(_TRAILING.__mod__, zip(*trailing, strict=True))),
+    )
+
+
+def rows(
+    leading: list[str], trailing: list[str], metrics: dict[str, list], statuses: list[str]
+) -> str:
+    """Whole entries, separated by ",\\n": ``leading`` and ``trailing`` from
+    :func:`row_texts`, the metric columns of the same entries, and their
+    statuses (an entry that was not audited has no ``folds_in_image``)."""
+    fields: list[list[str]] = []
+    for name in METRIC_COLUMNS:
+        values = metrics[name]
+        if name == "tail":
+            fields.append(list(map(_TAILS.__getitem__, values)))
+        elif name == "folds_in_image":
+            fields.append(
+                [
+                    _BOOLEAN[bool(fold)] if status == STATUS_OK else "null"
+                    for fold, status in zip(values, statuses, strict=True)
+                ]
+            )
+        else:
+            fields.append(_floats(values))
+    middle = map(_METRICS.__mod__, zip(*fields, strict=True))
+    return ",\n".join(map("".join, zip(leading, middle, trailing, strict=True)))
+
+
+def join(texts: list[str]) -> str:
+    """The entries of several files as one text."""
+    return ",\n".join(text for text in texts if text)
+
+
+def _head(audit: Audit) -> dict[str, Any]:
     return {
         "lensaudit": __version__,
         "database": {
@@ -51,10 +137,26 @@ def document(audit: Audit) -> dict[str, Any]:
             ],
         },
         "summary": _clean(audit.summary.to_dict()),
-        "entries": entries,
     }
 
 
+def document(audit: Audit) -> dict[str, Any]:
+    """The JSON document as Python data."""
+    columns = audit.columns()
+    for name in FLOAT_COLUMNS:
+        columns[name] = [_json_float(v) for v in columns[name]]
+    entries = [dict(zip(COLUMNS, row, strict=True)) for row in zip(*columns.values(), strict=True)]
+    return {**_head(audit), "entries": entries}
+
+
 def write(audit: Audit, stream: TextIO) -> None:
-    json.dump(document(audit), stream, indent=1, allow_nan=False)
-    stream.write("\n")
+    head = json.dumps({**_head(audit), "entries": []}, indent=1, allow_nan=False)
+    assert head.endswith(_ENTRIES_END)
+    entries = join(list(audit.rows("json")))
+    if entries:  # as json.dump lays out a list that is not empty
+        head = head[: -len("[]\n}")] + "[\n"
+        stream.write(head)
+        stream.write(entries)
+        stream.write("\n ]\n}\n")
+    else:
+        stream.write(head + "\n")

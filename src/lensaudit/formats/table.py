@@ -75,19 +75,27 @@ def lines(audit: Audit) -> list[str]:
         f"(or circle, for circular fisheyes): {len(folding)}"
     )
     if folding:
-        entries = audit.entries
-        m = audit.metrics
+        # Columns, not entries: a warm scan then builds no entry object.
+        column = audit.column
+        r_normalized = audit.metric_columns()["r_normalized"]
+        makers, lenses, focals = column("maker"), column("lens"), column("focal")
+        crops, types, files, lines_ = (
+            column("crop_factor"),
+            column("type"),
+            column("file"),
+            column("line"),
+        )
         out += text_table(
             ["r_normalized", "maker", "lens", "focal", "crop", "type", "where"],
             [
                 [
-                    f"{m.r_normalized[i]:.3f}",
-                    entries[i].maker,
-                    entries[i].lens,
-                    _focal(entries[i].focal),
-                    f"{entries[i].crop_factor:g}",
-                    entries[i].type,
-                    f"{entries[i].file}:{entries[i].line}",
+                    f"{r_normalized[i]:.3f}",
+                    makers[i],
+                    lenses[i],
+                    _focal(focals[i]),
+                    f"{crops[i]:g}",
+                    types[i],
+                    f"{files[i]}:{lines_[i]}",
                 ]
                 for i in folding
             ],
@@ -99,13 +107,19 @@ def lines(audit: Audit) -> list[str]:
         f"flagged instead; see column r_normalized_paper.)"
     )
 
-    problems = [e for e in audit.entries if e.status != "ok"]
+    statuses = audit.column("status")
+    problems = [i for i, status in enumerate(statuses) if status != "ok"]
     if problems:
         out.append("")
         counts = ", ".join(f"{n} {s}" for s, n in summary.statuses.items() if s != "ok")
         out.append(f"Not audited: {len(problems)} entries ({counts})")
-        for entry in problems[:PROBLEMS_SHOWN]:
-            out.append(f"  {entry.file}:{entry.line}: {entry.status}: {entry.message}")
+        files, lines_, messages = (
+            audit.column("file"),
+            audit.column("line"),
+            audit.column("message"),
+        )
+        for i in problems[:PROBLEMS_SHOWN]:
+            out.append(f"  {files[i]}:{lines_[i]}: {statuses[i]}: {messages[i]}")
         if len(problems) > PROBLEMS_SHOWN:
             out.append(
                 f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"

@@ -1,0 +1,77 @@
+"""The columns of an audit, in output order, and how their numbers are written.
+
+The pipeline, the parse cache, the summary and the output formats all name
+columns; they take the names from here, so that none of them has to import
+another for it.
+"""
+
+from __future__ import annotations
+
+#: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
+COLUMNS = (
+    "file",
+    "line",
+    "maker",
+    "lens",
+    "type",
+    "crop_factor",
+    "aspect_ratio",
+    "model",
+    "focal",
+    "real_focal",
+    "a",
+    "b",
+    "c",
+    "k1",
+    "k2",
+    "r_max",
+    "d_max",
+    "tail",
+    "r_corner",
+    "r_normalized",
+    "r_corner_paper",
+    "r_normalized_paper",
+    "folds_in_image",
+    "status",
+    "message",
+)
+
+#: Columns computed by the audit; the others are read from the database.
+METRIC_COLUMNS = (
+    "r_max", "d_max", "tail", "r_corner", "r_normalized", "r_corner_paper",
+    "r_normalized_paper", "folds_in_image",
+)  # fmt: skip
+ENTRY_COLUMNS = tuple(name for name in COLUMNS if name not in METRIC_COLUMNS)
+#: Columns holding numbers (written as shortest round-trip floats, inf, or empty).
+FLOAT_COLUMNS = frozenset(COLUMNS) - {
+    "file", "line", "maker", "lens", "type", "model", "tail", "folds_in_image", "status",
+    "message",
+}  # fmt: skip
+#: The metric columns held as small integers: ``tail`` -1/0/1, ``folds_in_image`` 0/1.
+METRIC_FLAG_COLUMNS = ("tail", "folds_in_image")
+#: The metric columns that hold floats.
+METRIC_FLOAT_COLUMNS = tuple(name for name in METRIC_COLUMNS if name not in METRIC_FLAG_COLUMNS)
+
+_FIRST_METRIC = COLUMNS.index(METRIC_COLUMNS[0])
+#: The columns of a row before its metrics, and after them: the metrics are one
+#: run of columns, so a row is its entry's text, the metrics, then the rest.
+LEADING_COLUMNS = COLUMNS[:_FIRST_METRIC]
+TRAILING_COLUMNS = COLUMNS[_FIRST_METRIC + len(METRIC_COLUMNS) :]
+assert COLUMNS[_FIRST_METRIC : _FIRST_METRIC + len(METRIC_COLUMNS)] == METRIC_COLUMNS
+
+#: ``tail`` as written: the sign of D(r) beyond r_max, or "" where there is none.
+TAIL_NAMES = {1: "positive", -1: "negative", 0: ""}
+
+
+def format_float(value: float) -> str:
+    """A float as the text formats write it: shortest round-trip, inf, or empty for NaN."""
+    text = repr(value)
+    return "" if text == "nan" else text
+
+
+def format_floats(values: list[float]) -> list[str]:
+    """:func:`format_float` over a list, at C speed for the common case."""
+    texts = list(map(repr, values))
+    if "nan" in texts:
+        texts = ["" if text == "nan" else text for text in texts]
+    return texts

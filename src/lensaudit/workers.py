@@ -1,0 +1,213 @@
+"""Parse database files in worker processes while the calling process does other work.
+
+A fresh ``lensaudit scan`` spends about as long importing numpy as parsing
+XML. Where more than one CPU is available, :func:`parse_all` forks worker
+processes before that import; they parse files meanwhile, and the calling
+process joins them once its own work is done. Files are handed out one at a
+time, largest first, through a pipe, so that whichever process is free takes
+the next one. Results come back as :mod:`marshal` data: the packed columns
+of :mod:`lensaudit.cache`, not entry objects.
+
+Workers are used only where they are safe and pay: ``os.fork`` exists, the
+process runs a single thread (forking a threaded process can deadlock the
+child), more than one CPU is available to it, and there is enough to parse.
+Otherwise the files are parsed in a thread, as libxml2 parses without
+holding the GIL. A worker that fails costs only time: whatever it did not
+return is parsed by the calling process, which then meets any error itself.
+"""
+
+from __future__ import annotations
+
+import marshal
+import os
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn, TypeVar
+
+T = TypeVar("T")
+
+#: Below this many bytes to parse, a worker costs more than it saves.
+MIN_BYTES = 256 * 1024
+#: Worker processes at most, whatever the number of CPUs.
+MAX_WORKERS = 8
+#: Pieces of work at most: 4 bytes each in the queue, which must fit in a pipe at once.
+_MAX_TASKS = 1024
+
+
+@dataclass(slots=True)
+class Job:
+    """A file to parse: its absolute path, display name, and its bytes if already read."""
+
+    path: Path
+    name: str
+    data: bytes | None = None
+
+
+def parse_all(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[], Any]) -> list[T]:
+    """``[parse(job) for job in jobs]``, computed while ``meanwhile()`` runs here.
+
+    ``parse`` must be deterministic and its results :mod:`marshal` data, as
+    it may run in a forked process. Exceptions of ``meanwhile`` and of
+    ``parse`` (as met in this process) are raised.
+    """
+    sizes = [_size(job) for job in jobs] if jobs and _can_fork() else []
+    workers = min(_cpus() - 1, len(jobs) - 1, MAX_WORKERS) if sum(sizes) >= MIN_BYTES else 0
+    if workers < 1:
+        return _in_thread(jobs, parse, meanwhile)
+    return _in_processes(jobs, sizes, workers, parse, meanwhile)
+
+
+def _can_fork() -> bool:
+    if not hasattr(os, "fork"):
+        return False
+    threading = sys.modules.get("threading")
+    if threading is not None and threading.active_count() > 1:
+        return False
+    try:  # threads started by C code (a BLAS pool) count too
+        return len(os.listdir("/proc/self/task")) == 1
+    except OSError:  # no /proc: numpy is what would have started some
+        return "numpy" not in sys.modules
+
+
+def _cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _size(job: Job) -> int:
+    if job.data is not None:
+        return len(job.data)
+    try:
+        return os.stat(job.path).st_size
+    except OSError:
+        return 0
+
+
+def _in_thread(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[], Any]) -> list[T]:
+    if not jobs:
+        meanwhile()
+        return []
+    import threading
+
+    outcome: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            outcome["result"] = [parse(job) for job in jobs]
+        except BaseException as error:  # handed to the caller, not lost in the thread
+            outcome["error"] = error
+
+    thread = threading.Thread(target=work, name="lensaudit-parse", daemon=True)
+    thread.start()
+    try:
+        meanwhile()
+    finally:
+        thread.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["result"]
+
+
+def _in_processes(
+    jobs: list[Job],
+    sizes: list[int],
+    workers: int,
+    parse: Callable[[Job], T],
+    meanwhile: Callable[[], Any],
+) -> list[T]:
+    # Largest first, so that the last pieces, taken by whoever is free, are small.
+    order = sorted(range(len(jobs)), key=sizes.__getitem__, reverse=True)
+    count = min(len(order), _MAX_TASKS)
+    tasks = [order[start::count] for start in range(count)]
+    queue, queue_input = os.pipe()
+    try:
+        os.write(queue_input, b"".join(n.to_bytes(4, "little") for n in range(count)))
+    finally:
+        os.close(queue_input)  # an empty queue then reads as its end
+    children: dict[int, int] = {}  # pid -> read end of its results
+    results: dict[int, T] = {}
+    try:
+        for _ in range(workers):
+            output, output_input = os.pipe()
+            pid = os.fork()
+            if pid == 0:
+                os.close(output)
+                _work(queue, output_input, tasks, jobs, parse)
+            os.close(output_input)
+            children[pid] = output
+        meanwhile()
+        for index in _take(queue, tasks):
+            results[index] = parse(jobs[index])
+        for pid, output in list(children.items()):
+            results.update(_collect(output))
+            os.close(output)
+            del children[pid]
+            os.waitpid(pid, 0)
+    finally:
+        os.close(queue)
+        _stop(children)
+    # What a worker did not return (it failed, or was killed) is parsed here.
+    return [results[i] if i in results else parse(jobs[i]) for i in range(len(jobs))]
+
+
+def _take(queue: int, tasks: list[list[int]]) -> Iterator[int]:
+    """Indices of the jobs of each task taken from the queue, until it is empty."""
+    while True:
+        number = os.read(queue, 4)
+        if len(number) != 4:  # reads of 4 bytes from a pipe written in 4s are whole
+            return
+        yield from tasks[int.from_bytes(number, "little")]
+
+
+def _work(
+    queue: int, output: int, tasks: list[list[int]], jobs: list[Job], parse: Callable[[Job], T]
+) -> NoReturn:
+    """A worker's life: parse jobs from the queue, send the results, exit."""
+    code = 1
+    try:
+        import gc
+
+        gc.disable()  # a short life, ended by os._exit: nothing to collect
+        done = [(index, parse(jobs[index])) for index in _take(queue, tasks)]
+        data = memoryview(marshal.dumps(done))
+        while data:
+            data = data[os.write(output, data) :]
+        code = 0
+    except BaseException:  # noqa: S110  (the caller parses what is missing)
+        pass
+    finally:
+        # Not sys.exit: the parent's cleanup, atexit handlers and buffered
+        # output belong to the parent.
+        os._exit(code)
+
+
+def _collect(output: int) -> dict[int, Any]:
+    """The results a worker sent: job index -> result; empty if it failed."""
+    chunks = []
+    while chunk := os.read(output, 1 << 20):
+        chunks.append(chunk)
+    try:
+        done = marshal.loads(b"".join(chunks))
+        return {index: result for index, result in done}
+    except (EOFError, ValueError, TypeError):
+        return {}
+
+
+def _stop(children: dict[int, int]) -> None:
+    """End and reap workers whose results were not collected (an error here)."""
+    import signal
+
+    for pid, output in children.items():
+        os.close(output)
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+        try:
+            os.waitpid(pid, 0)
+        except OSError:
+            pass
