@@ -524,9 +524,17 @@ def _sqrt_fraction(d: Fraction, bits: int = 160) -> Fraction:
     """sqrt(d) to about 2^-bits relative (d >= 0), as a fraction."""
     if d == 0:
         return Fraction(0)
-    shift = 2 * bits
-    scaled = (d.numerator << shift) // d.denominator
-    return Fraction(math.isqrt(scaled), 1 << bits)
+    magnitude = d.numerator.bit_length() - d.denominator.bit_length()
+    shift = max(0, bits - magnitude // 2)
+    return Fraction(math.isqrt((d.numerator << (2 * shift)) // d.denominator), 1 << shift)
+
+
+def to_float(value: Fraction) -> float:
+    """A fraction rounded to a double; beyond the double range, an infinity."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 @dataclass(frozen=True)
@@ -543,8 +551,12 @@ class ExactTurn:
         return sign_of_surd(self.p - bound * self.q, Fraction(self.e), self.d) * _sign(self.q)
 
     def value(self) -> Fraction:
-        """x to about 160 bits."""
-        return (self.p + self.e * _sqrt_fraction(self.d)) / self.q
+        """x to about 2^-150 relative."""
+        root = self.e * _sqrt_fraction(self.d)
+        if _sign(self.p) * _sign(root) < 0:
+            # p + e sqrt(d) would cancel: (p^2 - d) / (p - e sqrt(d)) does not.
+            return (self.p * self.p - self.d) / ((self.p - root) * self.q)
+        return (self.p + root) / self.q
 
 
 def exact_turning_points(c1: float, c2: float, c3: float) -> list[ExactTurn]:
@@ -597,7 +609,7 @@ def sign_change_before(
     for index in np.flatnonzero(doubtful & ~unknown):
         a, b, c, bound = (float(v[index]) for v in (c1, c2, c3, limit))
         roots = exact_turning_points(a, b, c)
-        x[index] = float(roots[0].value()) if roots else math.inf
+        x[index] = to_float(roots[0].value()) if roots else math.inf
         before[index] = bool(roots) and (
             math.isinf(bound) or roots[0].sign_minus(as_written(bound)) < 0
         )

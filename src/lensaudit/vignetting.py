@@ -59,6 +59,7 @@ from .calibrations import (
     sign_change_before,
     sign_of_surd,
     status_findings,
+    to_float,
     turning_points,
 )
 from .loader import STATUS_OK
@@ -214,7 +215,7 @@ def exact_minimum(k1: float, k2: float, k3: float, w_image: float) -> tuple[floa
     candidates = [Fraction(0), limit] + [t.value() for t in _turns_inside(k1, k2, k3, limit)]
     values = [1 + w * (a1 + w * (a2 + w * a3)) for w in candidates]
     best = min(range(len(values)), key=values.__getitem__)
-    return float(values[best]), float(candidates[best])
+    return to_float(values[best]), to_float(candidates[best])
 
 
 def compute(
