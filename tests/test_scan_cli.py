@@ -6,6 +6,9 @@ import csv
 import io
 import json
 import math
+import os
+import subprocess
+import sys
 
 import pytest
 from click.testing import CliRunner
@@ -125,3 +128,119 @@ def test_default_is_the_bundled_database(runner, bundled_db):
     assert result.exit_code == 0
     assert "bundled with lensfunpy" in result.output.splitlines()[0]
     assert str(bundled_db) in result.output.splitlines()[0]
+
+
+# --- scan --kind vignetting | tca ------------------------------------------
+
+VIGNETTING_HEADER = (
+    "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,aperture,distance,"
+    "k1,k2,k3,r_corner,r_zero,c_min,r_min,r_turn,zero_in_image,low_in_image,monotone,"
+    "severity,status,message"
+)
+TCA_HEADER = (
+    "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,kr,kb,vr,vb,cr,cb,br,bb,"
+    "r_corner,r_fold_red,r_fold_blue,folds_in_image,severity,status,message"
+)
+
+
+@pytest.fixture
+def calibration_db(write_xml):
+    path = write_xml(
+        lens_xml(
+            '<distortion model="poly3" focal="10" k1="-0.01"/>',
+            '<vignetting model="pa" focal="10" aperture="4" distance="10" k1="-1.2" k2="0.1"/>',
+            '<vignetting model="pa" focal="10" aperture="8" distance="10" k1="-0.3"/>',
+            '<vignetting model="pa" focal="10" aperture="11" distance="10" k1="x"/>',
+            '<tca model="poly3" focal="10" vr="1" br="-0.2" vb="1.0001"/>',
+            '<tca model="linear" focal="20" kr="1.0001" kb="0.9999"/>',
+        )
+    )
+    return path.parent
+
+
+def test_kind_vignetting_csv_header_is_the_documented_columns(runner, calibration_db):
+    result = runner.invoke(main, ["scan", str(calibration_db), "--kind", "vignetting", "-f", "csv"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[0] == VIGNETTING_HEADER
+
+
+def test_kind_tca_csv_header_is_the_documented_columns(runner, calibration_db):
+    result = runner.invoke(main, ["scan", str(calibration_db), "--kind", "tca", "-f", "csv"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[0] == TCA_HEADER
+
+
+def test_kind_vignetting_lists_every_entry_with_its_status_and_severity(runner, calibration_db):
+    result = runner.invoke(main, ["scan", str(calibration_db), "-k", "vignetting", "-f", "csv"])
+    rows = list(csv.DictReader(io.StringIO(result.output)))
+    assert [(r["aperture"], r["status"], r["severity"]) for r in rows] == [
+        ("4.0", "ok", "error"),
+        ("8.0", "ok", ""),
+        ("11.0", "bad_value", ""),
+    ]
+    assert rows[0]["zero_in_image"] == "true" and rows[1]["monotone"] == "true"
+    assert rows[2]["zero_in_image"] == "" and rows[2]["c_min"] == ""
+    assert float(rows[1]["c_min"]) == 0.7
+    assert float(rows[1]["r_zero"]) == pytest.approx(math.sqrt(1 / 0.3), rel=1e-15)
+
+
+def test_kind_tca_json_is_strict_and_has_every_entry(runner, calibration_db):
+    result = runner.invoke(main, ["scan", str(calibration_db), "-k", "tca", "-f", "json"])
+    document = json.loads(result.output)
+    assert document["kind"] == "tca"
+    entries = document["entries"]
+    assert [(e["model"], e["folds_in_image"], e["severity"]) for e in entries] == [
+        ("poly3", True, "error"),
+        ("linear", False, ""),
+    ]
+    assert entries[1]["r_fold_red"] == "inf" and entries[1]["vr"] is None
+    assert document["summary"]["folds_in_image"] == 1
+
+
+def test_kind_vignetting_table_names_the_entries_below_a_tenth(runner, calibration_db):
+    result = runner.invoke(main, ["scan", str(calibration_db), "-k", "vignetting"])
+    assert result.exit_code == 0, result.output
+    assert "3 vignetting entries, 2 audited" in result.output
+    assert "test.xml:11" in result.output  # the C <= 0 entry, by file and line
+    assert "Not audited: 1 entries (1 bad_value)" in result.output
+
+
+def test_kind_distortion_is_the_default_and_unchanged(runner, calibration_db):
+    plain = runner.invoke(main, ["scan", str(calibration_db), "-f", "csv", "--no-cache"])
+    named = runner.invoke(
+        main, ["scan", str(calibration_db), "-f", "csv", "--no-cache", "-k", "distortion"]
+    )
+    assert plain.exit_code == named.exit_code == 0
+    assert plain.output == named.output
+    assert plain.output.splitlines()[0] == EXPECTED_HEADER
+
+
+@pytest.mark.parametrize("kind", ["vignetting", "tca"])
+def test_kind_with_a_missing_path_exits_2_with_one_line(runner, tmp_path, kind):
+    result = runner.invoke(main, ["scan", str(tmp_path / "nowhere"), "-k", kind])
+    assert result.exit_code == 2
+    assert result.output.count("\n") == 1 and "no such file" in result.output
+
+
+def test_kind_with_only_broken_files_exits_2(runner, write_xml):
+    path = write_xml(b"\xff\xfe not xml")
+    result = runner.invoke(main, ["scan", str(path), "-k", "vignetting"])
+    assert result.exit_code == 2
+    assert "no file could be read" in result.output
+
+
+def test_a_distortion_scan_does_no_vignetting_or_tca_work(tmp_path):
+    probe = (
+        "import os, sys\n"
+        "from lensaudit.cli import main\n"
+        "sys.argv = ['lensaudit', 'scan', '-f', 'csv', '-o', os.devnull]\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[-1] in "
+        "('calibrations', 'vignetting', 'tca')))\n"
+    )
+    environment = dict(os.environ, LENSAUDIT_CACHE_DIR=str(tmp_path / "cache"))
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, env=environment
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
