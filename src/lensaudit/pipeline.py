@@ -337,6 +337,14 @@ def _audit_files(
         jobs.append((index, Job(path, name, data)))
 
     if jobs:
+        # What parsing needs, imported once, before any worker is forked.
+        from lxml import etree  # noqa: F401
+
+        from . import cache  # noqa: F401
+        from .formats import row_format
+
+        for name in formats:
+            row_format(name)
         results = parse_all([job for _, job in jobs], partial(_parse, formats=formats), _metrics)
         for (index, job), (digest, packed, count, error, row_texts) in zip(
             jobs, results, strict=True

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from .options import EXIT_INPUT_ERROR, fail
+from .scan import cache_option
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -48,6 +49,7 @@ def _entry_options(function: Callable[..., Any]) -> Callable[..., Any]:
             help="Database directory or XML file (repeatable; default: the "
             "database bundled with lensfunpy).",
         ),
+        cache_option,
     ]
     for option in reversed(options):
         function = option(function)
@@ -61,12 +63,12 @@ def _check_format(output: Path) -> str:
     return fmt
 
 
-def _audit(paths: list[Path] | None) -> Audit:
+def _audit(paths: list[Path] | None, cache: bool) -> Audit:
     from ..loader import LoadError
     from ..pipeline import run
 
     try:
-        return run(paths or None)
+        return run(paths or None, cache=cache)
     except LoadError as error:
         fail(str(error))
         raise  # unreachable: fail() exits
@@ -78,6 +80,7 @@ def resolve_entry(
     focal: float | None,
     crop: float | None,
     databases: tuple[Path, ...],
+    cache: bool = True,
 ) -> tuple[Audit, int]:
     """The audit holding the named entry and the entry's index; exits 2 on bad input.
 
@@ -98,11 +101,11 @@ def resolve_entry(
                 )
             file, line = location
             paths = list(databases) or ([Path(file)] if Path(file).is_file() else None)
-            audit = _audit(paths)
+            audit = _audit(paths, cache)
             return audit, select.by_location(audit, file, line)
         if not query:
             fail('name an entry: FILE:LINE, or a query such as --lens "Tokina 11-16" --focal 11')
-        audit = _audit(list(databases))
+        audit = _audit(list(databases), cache)
         return audit, select.by_query(audit, query)
     except select.SelectionError as error:
         click.echo(f"lensaudit: error: {error}", err=True)
@@ -142,6 +145,7 @@ def curve(
     focal: float | None,
     crop: float | None,
     databases: tuple[Path, ...],
+    cache: bool,
     output: Path,
 ) -> None:
     """D(r) and D'(r) of one entry, with r_max and the image corner marked.
@@ -150,7 +154,7 @@ def curve(
     The model folds inside the image when D peaks (at r_max) below the corner.
     """
     _check_format(output)
-    audit, index = resolve_entry(entry, lens, focal, crop, databases)
+    audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
     from ..report import curves, figures, select
 
     m = audit.metrics
@@ -197,6 +201,7 @@ def warp(
     focal: float | None,
     crop: float | None,
     databases: tuple[Path, ...],
+    cache: bool,
     output: Path,
     size: str,
     scale: float | None,
@@ -212,7 +217,7 @@ def warp(
     width, height = _size(size)
     if scale is not None and not (0 < scale <= 10 and math.isfinite(scale)):
         fail("--scale must be a number in (0, 10]")
-    audit, index = resolve_entry(entry, lens, focal, crop, databases)
+    audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
     from ..report import figures, select
     from ..report import warp as warping
 

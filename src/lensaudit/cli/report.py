@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from .options import database_paths, fail
+from .scan import cache_option
 
 
 @click.command()
@@ -21,13 +22,16 @@ from .options import database_paths, fail
     help="Directory to write the report into (created if needed).",
 )
 @click.option("--force", is_flag=True, help="Replace report files already in DIR.")
+@cache_option
 @click.option(
     "--paper",
     is_flag=True,
     help="Also put the paper's printed Tables 1-2 and values beside this audit, "
     "each difference explained (paper_comparison.md, and in report.html).",
 )
-def report(paths: tuple[Path, ...], output_dir: Path, force: bool, paper: bool) -> None:
+def report(
+    paths: tuple[Path, ...], output_dir: Path, force: bool, cache: bool, paper: bool
+) -> None:
     """Write tables, figures and a self-contained HTML report into DIR.
 
     PATH is a database directory (every *.xml in it) or XML files. Without
@@ -59,7 +63,8 @@ def report(paths: tuple[Path, ...], output_dir: Path, force: bool, paper: bool) 
         except PaperValuesError as error:
             fail(str(error))
     try:
-        audit = run(list(paths) or None)
+        # entries.csv is scan's CSV: its rows come from the cache when the files are unchanged.
+        audit = run(list(paths) or None, cache=cache, formats=("csv",))
     except LoadError as error:
         fail(str(error))
     if audit.files and all(f.error for f in audit.files):

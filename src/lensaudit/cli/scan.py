@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import gc
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -10,6 +13,18 @@ from .options import database_paths, fail, output_file, output_stream
 
 FORMAT_NAMES = ("table", "csv", "json")
 KIND_NAMES = ("distortion", "vignetting", "tca")
+
+
+def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``--cache/--no-cache``: the parse cache, on by default (scan, report, plot)."""
+    return click.option(
+        "--cache/--no-cache",
+        default=True,
+        show_default=True,
+        help="Reuse what an earlier run made of files whose content is unchanged (the "
+        "cache is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR "
+        "or ~/.cache/lensaudit.",
+    )(function)
 
 
 @click.command()
@@ -33,14 +48,7 @@ KIND_NAMES = ("distortion", "vignetting", "tca")
     "divides by zero) or tca (where a colour channel folds).",
 )
 @output_file
-@click.option(
-    "--cache/--no-cache",
-    default=True,
-    show_default=True,
-    help="Reuse what an earlier run made of files whose content is unchanged (the cache "
-    "is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR or "
-    "~/.cache/lensaudit.",
-)
+@cache_option
 def scan(
     paths: tuple[Path, ...], output_format: str, kind: str, output: Path | None, cache: bool
 ) -> None:
@@ -90,14 +98,22 @@ def scan(
     from ..pipeline import run
 
     _single_blas_thread()
+    collecting = gc.isenabled()
+    # What the scan allocates lives until it ends: the cycle collector would
+    # only walk it over and over (a tenth of importing numpy, for one).
+    gc.disable()
     try:
-        audit = run(list(paths) or None, cache=cache, formats=(output_format,))
-    except LoadError as error:
-        fail(str(error))
-    if audit.files and all(f.error for f in audit.files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
-    with output_stream(output) as stream:
-        writer(output_format)(audit, stream)
+        try:
+            audit = run(list(paths) or None, cache=cache, formats=(output_format,))
+        except LoadError as error:
+            fail(str(error))
+        if audit.files and all(f.error for f in audit.files):
+            fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
+        with output_stream(output) as stream:
+            writer(output_format)(audit, stream)
+    finally:
+        if collecting:
+            gc.enable()
 
 
 def _single_blas_thread() -> None:
