@@ -1,18 +1,25 @@
-"""End-to-end `lensaudit scan --format csv` beside liblensfun loading the same database.
+"""End-to-end `lensaudit scan`, every output format, beside liblensfun loading the same database.
 
-Both run as fresh processes, in turns, on the database bundled with
+Everything runs as fresh processes, in turns, on the database bundled with
 lensfunpy: liblensfun's own load is `python -c "import lensfunpy;
-lensfunpy.Database()"`. "cold" scans parse and audit every file (--no-cache);
-"first" scans do the same with an empty cache directory each time, and write
-the cache; "warm" scans find the files unchanged in lensaudit's cache of
-parsed and audited files (a fresh cache directory, primed once), which still
-reads and hashes every file. Times are medians;
-memory is the peak resident size.
-In-process rows time the same work without interpreter start-up and imports.
+lensfunpy.Database()"`. "cold" scans parse and audit every file
+(--no-cache); "first" scans do the same with an empty cache directory each
+time, and write the cache; "warm" scans find the files unchanged in
+lensaudit's cache (a cache directory primed once by the same command), which
+still reads and hashes every file. Output goes to /dev/null.
+
+Times are medians; "CPU s" is the median user + system time of the process
+and the worker processes it forks; "peak MB" is the largest resident size of
+any one of them (workers share most of their memory with the scan that
+forked them). lensaudit's bytecode is compiled first, as pip does when it
+installs a package (PYTHONDONTWRITEBYTECODE would otherwise have every run
+compile it from source). In-process rows time pipeline.run() alone, without
+interpreter start-up, imports or output.
 """
 
 from __future__ import annotations
 
+import compileall
 import os
 import shutil
 import statistics
@@ -25,47 +32,41 @@ from pathlib import Path
 TITLE = "Whole bundled database: lensaudit scan vs liblensfun's own load"
 
 BASELINE = [sys.executable, "-c", "import lensfunpy; lensfunpy.Database()"]
+FORMATS = ("table", "csv", "json")
 
 
-def scan_command() -> list[str]:
+def scan_command(output_format: str) -> list[str]:
     installed = Path(sys.executable).with_name("lensaudit")
     prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    return prefix + ["scan", "--format", "csv", "-o", os.devnull]
+    return prefix + ["scan", "--format", output_format, "-o", os.devnull]
 
 
-def wall_time(command: list[str], env: dict[str, str], empty_cache: bool = False) -> float:
-    """Seconds one run of ``command`` takes; ``empty_cache`` gives it a new cache directory."""
-    if empty_cache:
-        with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
-            return wall_time(command, dict(env, LENSAUDIT_CACHE_DIR=fresh))
+def compile_bytecode() -> None:
+    """Compile lensaudit's modules, as an installed package has them."""
+    import lensaudit
+
+    compileall.compile_dir(Path(lensaudit.__file__).parent, quiet=1)
+
+
+def measure(command: list[str], env: dict[str, str]) -> tuple[float, float, float]:
+    """Wall seconds, CPU seconds (with waited-for children) and peak MB of one run."""
     start = time.perf_counter()
-    subprocess.run(command, check=True, env=env, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - start
+    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(process.pid, 0)
+    wall = time.perf_counter() - start
+    process.returncode = os.waitstatus_to_exitcode(status)
+    if process.returncode != 0:
+        raise subprocess.CalledProcessError(process.returncode, command)
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
 
 
-def peak_memory_mb(command: list[str], env: dict[str, str], empty_cache: bool = False) -> float:
-    """Peak resident size of one run of ``command``, in MB."""
-    if empty_cache:
-        with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
-            return peak_memory_mb(command, dict(env, LENSAUDIT_CACHE_DIR=fresh))
-    probe = (
-        "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, "
-        "stdout=subprocess.DEVNULL); "
-        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", probe, *command], check=True, env=env, capture_output=True, text=True
-    ).stdout
-    return int(out.strip()) / 1024
-
-
-def in_process(repeats: int) -> dict[str, float]:
+def in_process(repeats: int, warm_cache: str) -> dict[str, float]:
     import lensfunpy
 
     from lensaudit.pipeline import run
 
     times: dict[str, list[float]] = {"liblensfun": [], "cold": [], "first": [], "warm": []}
-    primed = os.environ["LENSAUDIT_CACHE_DIR"]
+    os.environ["LENSAUDIT_CACHE_DIR"] = warm_cache
     run(cache=True)
     for _ in range(repeats):
         with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as fresh:
@@ -73,7 +74,7 @@ def in_process(repeats: int) -> dict[str, float]:
             start = time.perf_counter()
             run(cache=True)
             times["first"].append(time.perf_counter() - start)
-            os.environ["LENSAUDIT_CACHE_DIR"] = primed
+            os.environ["LENSAUDIT_CACHE_DIR"] = warm_cache
         start = time.perf_counter()
         lensfunpy.Database()
         times["liblensfun"].append(time.perf_counter() - start)
@@ -88,48 +89,61 @@ def in_process(repeats: int) -> dict[str, float]:
 
 def run(quick: bool) -> list[dict]:
     repeats = 5 if quick else 15
-    cache = tempfile.mkdtemp(prefix="lensaudit-bench-")
-    env = dict(os.environ, LENSAUDIT_CACHE_DIR=cache)
+    compile_bytecode()
+    scratch = Path(tempfile.mkdtemp(prefix="lensaudit-bench-"))
     try:
-        scan = scan_command()
-        commands = {
-            "liblensfun load (lensfunpy.Database)": BASELINE,
-            "lensaudit scan, cold (--no-cache)": scan + ["--no-cache"],
-            "lensaudit scan, first (empty cache)": scan,
-            "lensaudit scan, warm (cache)": scan,
+        env = dict(os.environ)
+        # name -> (command, cache directory: "" for none, None for a new empty one each run)
+        runs: dict[str, tuple[list[str], str | None]] = {
+            "liblensfun load (lensfunpy.Database)": (BASELINE, "")
         }
-        wall_time(scan, env)  # primes the cache
-        times: dict[str, list[float]] = {name: [] for name in commands}
+        for output_format in FORMATS:
+            scan = scan_command(output_format)
+            warm = scratch / f"warm-{output_format}"
+            runs[f"scan -f {output_format}, cold (--no-cache)"] = (scan + ["--no-cache"], "")
+            runs[f"scan -f {output_format}, first (empty cache)"] = (scan, None)
+            runs[f"scan -f {output_format}, warm (cache)"] = (scan, str(warm))
+            measure(scan, dict(env, LENSAUDIT_CACHE_DIR=str(warm)))  # primes its cache
+        samples: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
         for _ in range(repeats):
-            for name, command in commands.items():
-                times[name].append(wall_time(command, env, empty_cache="first" in name))
-        medians = {name: statistics.median(values) for name, values in times.items()}
-        baseline = medians["liblensfun load (lensfunpy.Database)"]
+            for name, (command, cache) in runs.items():
+                if cache is None:
+                    with tempfile.TemporaryDirectory(dir=scratch) as fresh:
+                        samples[name].append(measure(command, dict(env, LENSAUDIT_CACHE_DIR=fresh)))
+                else:
+                    directory = cache or str(scratch / "unused")
+                    samples[name].append(measure(command, dict(env, LENSAUDIT_CACHE_DIR=directory)))
+        medians = {
+            name: [statistics.median(column) for column in zip(*values, strict=True)]
+            for name, values in samples.items()
+        }
+        baseline = medians["liblensfun load (lensfunpy.Database)"][0]
         rows = [
             {
                 "run": name,
-                "median s": medians[name],
-                "vs liblensfun": medians[name] / baseline,
-                "peak MB": peak_memory_mb(command, env, empty_cache="first" in name),
+                "median s": wall,
+                "vs liblensfun": wall / baseline,
+                "CPU s": cpu,
+                "peak MB": peak,
             }
-            for name, command in commands.items()
+            for name, (wall, cpu, peak) in medians.items()
         ]
-        os.environ["LENSAUDIT_CACHE_DIR"] = cache
-        inside = in_process(repeats)
+        inside = in_process(repeats, str(scratch / "in-process"))
         for name, label in (
             ("liblensfun", "in-process: liblensfun load"),
-            ("cold", "in-process: lensaudit load + audit, cold"),
-            ("first", "in-process: lensaudit load + audit, first (empty cache)"),
-            ("warm", "in-process: lensaudit load + audit, warm"),
+            ("cold", "in-process: pipeline.run, cold"),
+            ("first", "in-process: pipeline.run, first (empty cache)"),
+            ("warm", "in-process: pipeline.run, warm"),
         ):
             rows.append(
                 {
                     "run": label,
                     "median s": inside[name],
                     "vs liblensfun": inside[name] / inside["liblensfun"],
+                    "CPU s": "",
                     "peak MB": "",
                 }
             )
         return rows
     finally:
-        shutil.rmtree(cache, ignore_errors=True)
+        shutil.rmtree(scratch, ignore_errors=True)
