@@ -503,3 +503,48 @@ def test_findings_give_one_per_entry_with_its_code_and_severity(write_xml):
 def test_findings_leave_whole_file_problems_to_the_distortion_check(write_xml):
     path = write_xml("<lensdatabase><lens>")
     assert vignetting.findings(vignetting.audit(path).records()) == []
+
+
+# --- the report ------------------------------------------------------------
+
+
+@pytest.fixture
+def report_dir(write_xml, tmp_path):
+    from lensaudit.pipeline import run
+    from lensaudit.report import write_report
+
+    database = write_xml(
+        lens_xml(
+            '<distortion model="poly3" focal="8" k1="-0.01"/>',
+            '<vignetting model="pa" focal="8" aperture="4" distance="1000" k1="-0.5" k2="-0.6"/>',
+            '<vignetting model="pa" focal="9" aperture="4" distance="1000" k1="-0.95"/>',
+            '<vignetting model="pa" focal="10" aperture="4" distance="1000" k1="x"/>',
+            '<tca model="poly3" focal="8" vr="1" br="-0.2"/>',
+        )
+    ).parent
+    out = tmp_path / "report"
+    write_report(run(database), out)
+    return database, out
+
+
+def test_the_report_writes_vignetting_and_tca_csv_as_scan_does(report_dir):
+    from click.testing import CliRunner
+
+    from lensaudit.cli import main
+
+    database, out = report_dir
+    for kind in ("vignetting", "tca"):
+        result = CliRunner().invoke(main, ["scan", str(database), "-k", kind, "-f", "csv"])
+        assert (out / f"{kind}.csv").read_text(encoding="utf-8") == result.output
+
+
+def test_the_report_page_counts_and_lists_the_vignetting_and_tca_findings(report_dir):
+    _, out = report_dir
+    page = etree.parse(str(out / "report.html"), etree.HTMLParser())
+    counts = page.xpath('//table[@id="calibration-counts"]/tbody/tr')
+    cells = [[td.text for td in row.xpath("td")] for row in counts]
+    assert cells == [["vignetting", "3", "2", "1", "1", "0"], ["tca", "1", "1", "1", "0", "0"]]
+    worst = page.xpath('//table[@id="vignetting-worst"]/tbody/tr/td[last()]/text()')
+    assert worst == ["test.xml:11", "test.xml:12"]
+    assert page.xpath('//table[@id="tca-folding"]/tbody/tr/td[last()]/text()') == ["test.xml:14"]
+    assert "1 not audited" in page.xpath('string(//section[@id="vignetting-tca"])')

@@ -396,8 +396,10 @@ def render(
     table1: list[tuple[Any, ...]],
     table2: list[tuple[Any, ...]],
     comparison: Comparison | None = None,
+    calibrations_html: str = "",
 ) -> str:
-    """The whole page as a string."""
+    """The whole page as a string; ``calibrations_html`` is the vignetting and TCA
+    section (see :mod:`lensaudit.report.calibrations`), placed after the folds."""
     summary = audit.summary
     rows = entry_rows(audit)
     data = script_json({"columns": [list(c) for c in ENTRY_COLUMNS], "rows": rows})
@@ -464,6 +466,7 @@ Right: the paper's Eq. 29, which divides by a corner in focal-length units
 the model folds inside the image when its peak stays below the corner.</p>
 {_folding(audit)}
 </section>
+{calibrations_html}
 {comparison_html}
 <section id="all-entries"><h2>All entries</h2>
 {_not_audited(audit)}

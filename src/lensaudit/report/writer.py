@@ -30,6 +30,8 @@ REPORT_FILES = (
     "table2.md",
     "table2.csv",
     "folding.csv",
+    "vignetting.csv",
+    "tca.csv",
     "fig5_r_normalized.csv",
     "fig5_r_normalized.png",
     "fig5_r_normalized.svg",
@@ -136,7 +138,7 @@ def write_report(
     the paper comparison is added. Returns the paths written.
     """
     from ..formats import writer
-    from . import figures, histogram, html, provenance, tables
+    from . import calibrations, figures, histogram, html, provenance, tables
 
     directory = Path(directory)
     names = planned_files(paper_values is not None)
@@ -158,6 +160,7 @@ def write_report(
 
         comparison = paper.compare(audit, paper_values)
 
+    vignetting_audit, tca_audit = calibrations.audits(audit)
     buffer = io.StringIO()
     writer("csv")(audit, buffer)
     texts = {
@@ -190,6 +193,8 @@ def write_report(
         "table2.md": tables.to_markdown(tables.TABLE2_HEADER, table2, tables.TABLE2_CAPTION),
         "table2.csv": tables.to_csv(tables.TABLE2_HEADER, table2),
         "folding.csv": _csv_text(FOLDING_COLUMNS, folding_rows(audit)),
+        "vignetting.csv": calibrations.csv_text(vignetting_audit),
+        "tca.csv": calibrations.csv_text(tca_audit),
         "fig5_r_normalized.csv": _csv_text(
             ("bin_low", "bin_high", "count", "count_paper_units"), fig5.rows()
         ),
@@ -207,7 +212,14 @@ def write_report(
     _write_text(directory / "fig5_r_normalized.svg", svg)
     written += [png, directory / "fig5_r_normalized.svg"]
     page = html.render(
-        audit, facts, fig5, figures.inline_svg(svg, "fig5"), table1, table2, comparison
+        audit,
+        facts,
+        fig5,
+        figures.inline_svg(svg, "fig5"),
+        table1,
+        table2,
+        comparison,
+        calibrations.section(vignetting_audit, tca_audit),
     )
     _write_text(directory / "report.html", page)
     written.append(directory / "report.html")
