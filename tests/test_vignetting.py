@@ -548,3 +548,32 @@ def test_the_report_page_counts_and_lists_the_vignetting_and_tca_findings(report
     assert worst == ["test.xml:11", "test.xml:12"]
     assert page.xpath('//table[@id="tca-folding"]/tbody/tr/td[last()]/text()') == ["test.xml:14"]
     assert "1 not audited" in page.xpath('string(//section[@id="vignetting-tca"])')
+
+
+# --- the short path of the reader agrees with the full one -----------------
+
+attribute_texts = st.one_of(
+    decimals,
+    st.sampled_from(["0", "-1", " 2.5 ", "1_0", "nan", "inf", "-infinity", "1e999", "", "x", "٣"]),
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.sampled_from(["pa", "acm", "", None]),
+    st.dictionaries(
+        st.sampled_from(["focal", "aperture", "distance", "k1", "k2", "k3"]), attribute_texts
+    ),
+)
+def test_the_short_path_gives_the_record_the_full_examination_gives(model, attributes):
+    element = etree.Element("vignetting")
+    if model is not None:
+        element.set("model", model)
+    for key, value in attributes.items():
+        element.set(key, value)
+    spec = calibrations.SPECS["vignetting"]
+    context = calibrations.loader._lens_context(None)
+    context.problem = ""  # a lens without problems
+    fast = calibrations._entry(spec, element, "x.xml", context)
+    full = calibrations._checked_entry(spec, element, "x.xml", context)
+    assert repr(fast) == repr(full)

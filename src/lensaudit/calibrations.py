@@ -188,37 +188,54 @@ def _record(spec: _Spec, name: str, line: int, context: Any, model: str, values:
     )
 
 
+def _fast_layout(spec: _Spec, model: str) -> tuple[tuple[str, ...], list[int | None]]:
+    """(attributes read, in order) and, per record field after ``focal``, the
+    index of its value among them (None: NaN, not a field of this model)."""
+    names = spec.required + tuple(spec.models[model])
+    return names, [names.index(f) if f in names else None for f in spec.fields]
+
+
+_FAST = {
+    (spec.tag, model): _fast_layout(spec, model) for spec in SPECS.values() for model in spec.models
+}
+
+
 def _entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any:
     """The record of one element; the common case (plain numbers) takes a short path.
 
     Anything else is examined in full by :func:`_checked_entry`.
     """
-    get = element.get
-    model = get("model")
+    attributes = dict(element.items())
+    model = attributes.get("model")
     defaults = spec.models.get(model)  # type: ignore[arg-type]
     if defaults is not None and not context.problem:
-        required = [get(n) for n in spec.required]
-        optional = [get(n) for n in defaults]
-        if None not in required:
-            texts = required + [t for t in optional if t is not None]
-            joined = "".join(texts)  # type: ignore[arg-type]
-            # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
-            if joined.isascii() and "_" not in joined:
-                try:
-                    numbers = list(map(float, texts))  # type: ignore[arg-type]
-                except ValueError:
-                    numbers = None
-                if numbers is not None:
-                    total = sum(numbers)
-                    count = len(required)
-                    if total - total == 0 and min(numbers[:count]) > 0:  # all finite
-                        values = dict(zip(spec.required, numbers, strict=False))
-                        given = iter(numbers[count:])
-                        for (attribute, default), text in zip(
-                            defaults.items(), optional, strict=True
-                        ):
-                            values[attribute] = default if text is None else next(given)
-                        return _record(spec, name, element.sourceline or 0, context, model, values)
+        joined = "".join(attributes.values())
+        # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
+        if joined.isascii() and "_" not in joined:
+            try:
+                numbers = [float(attributes[n]) for n in spec.required]
+                numbers += [
+                    float(attributes[n]) if n in attributes else default
+                    for n, default in defaults.items()
+                ]
+            except (KeyError, ValueError):  # a missing required attribute, or not a number
+                numbers = None
+            if numbers is not None:
+                total = sum(numbers)
+                if total - total == 0 and min(numbers[: len(spec.required)]) > 0:  # all finite
+                    layout = _FAST[spec.tag, model][1]  # type: ignore[index]
+                    return spec.entry(
+                        name,
+                        element.sourceline or 0,
+                        context.maker,
+                        context.lens,
+                        context.type,
+                        context.crop_factor,
+                        context.aspect_ratio,
+                        model,
+                        numbers[0],
+                        *[NAN if i is None else numbers[i] for i in layout],
+                    )
     return _checked_entry(spec, element, name, context)
 
 
@@ -664,6 +681,7 @@ class CalibrationAudit:
         self.files = files
         self.entries = entries
         self.metrics = metrics
+        self._audited = [e.status == STATUS_OK for e in entries]
 
     def __len__(self) -> int:
         return len(self.entries)
@@ -671,7 +689,7 @@ class CalibrationAudit:
     @property
     def audited(self) -> list[bool]:
         """Per entry: whether it was audited (status ``ok``)."""
-        return [e.status == STATUS_OK for e in self.entries]
+        return self._audited
 
     def column(self, name: str) -> list[Any]:
         """One output column as a list: floats (NaN where empty), text, or
@@ -772,8 +790,9 @@ class CalibrationAudit:
             else:
                 fields.append(text_column(values))
         stream.write(",".join(self.COLUMNS) + "\n")
-        for row in zip(*fields, strict=True):
-            stream.write(",".join(row) + "\n")
+        rows = list(map(",".join, zip(*fields, strict=True)))
+        for start in range(0, len(rows), 1024):  # a few large writes, not one per row
+            stream.write("".join(row + "\n" for row in rows[start : start + 1024]))
 
     def document(self) -> dict[str, Any]:
         """The JSON document as Python data (strict JSON: inf as "inf", NaN as null)."""
