@@ -129,6 +129,16 @@ def test_editing_a_known_duplicate_lens_keeps_the_duplicate_known(tmp_path):
     assert [(f.code, f.known) for f in result.findings] == [("duplicate-lens", True)]
 
 
+def test_a_known_duplicate_lens_stays_known_when_both_are_renamed(tmp_path):
+    before = xml(lens("Standard", FINE, maker="Fuji"), lens("Standard", FOLDING, maker="Fuji"))
+    after = before.replace("<maker>Fuji</maker>", "<maker>Fujifilm</maker>")
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert [(f.code, f.known) for f in result.findings] == [
+        ("duplicate-lens", True),
+        ("fold-in-image", True),
+    ]
+
+
 def test_a_third_definition_of_a_known_duplicate_lens_is_new_at_the_third(tmp_path):
     first, second = lens("Lens A", FINE), lens("Lens A", FINE, mount="Other")
     third = lens("Lens A", FINE, mount="Third")

@@ -31,8 +31,9 @@ white space) and its own values (model, focal length, crop factor, aspect
 ratio, type, coefficients); a duplicate is its lens or calibration and the
 pair it is made of; a file-level finding is the file's name and the problem.
 What the baseline does not match exactly may still match less specifically:
-an entry by its values alone (its lens was renamed), a duplicate by its lens
-and focal length alone (one of the pair was edited). Each baseline finding
+an entry or a duplicate by its values alone (its lens was renamed), then a
+duplicate by its lens and focal length, or its name, alone (one of the pair
+was edited). Each baseline finding
 matches one finding only, so that a copy of a known entry under a new lens,
 or a third definition of a known duplicate lens, is new.
 
@@ -965,12 +966,12 @@ def _duplicate_focals(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]
                 related=((file.source.display, first_line),),
             )
             # The pair, in either order (a reordering may swap which comes
-            # first), of the lens by name; then the focal length of the lens,
-            # when one of the pair was edited; then the pair alone, when the
-            # lens was renamed.
+            # first), of the lens by name; then the pair alone, when the lens
+            # was renamed; then the lens and focal length, when one of the
+            # pair was edited.
             pair = (severity, DUPLICATE_FOCAL, *sorted((content, first_content), key=repr))
             lens_name = _lens_identity(entry.maker, entry.lens)
-            keys = ((*pair, lens_name), (*pair[:2], lens_name, *calibration[1:]), pair)
+            keys = ((*pair, lens_name), pair, (*pair[:2], lens_name, *calibration[1:]))
             yield index, Identified(finding, keys, (file.source.file_name,))
 
 
@@ -1029,10 +1030,16 @@ def _duplicate_lenses(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]
                 _clip_key((lens.maker, lens.model, lens.crop_factor)),
                 related=((earlier_file.source.display, earlier.line),),
             )
-            # The pair of lenses, in either order; then the name alone, when
-            # one of the pair was edited.
-            pair = sorted((content, content_of(earlier)), key=repr)
-            keys = ((severity, DUPLICATE_LENS, key, *pair), (severity, DUPLICATE_LENS, key))
+            # The name and the pair of lenses, in either order; then the pair
+            # alone, when both were renamed; then the name alone, when one of
+            # the pair was edited.
+            pair = (
+                severity,
+                DUPLICATE_LENS,
+                lens.crop_factor,
+                *sorted((content, content_of(earlier)), key=repr),
+            )
+            keys = ((*pair, key), pair, (severity, DUPLICATE_LENS, key))
             names = (file.source.file_name, earlier_file.source.file_name)
             yield index, Identified(finding, keys, names)
 
