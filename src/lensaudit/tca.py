@@ -171,12 +171,24 @@ class TCAAudit(CalibrationAudit):
     FLOAT_COLUMNS = FLOAT_COLUMNS
     BOOL_COLUMNS = BOOL_COLUMNS
 
+    def ratios(self) -> FloatArray:
+        """Per entry: the nearer channel's r_fold over r_corner (below 1: folds inside)."""
+        m = self.metrics
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.minimum(m["r_fold_red"], m["r_fold_blue"]) / m["r_corner"]
+
     def folding(self) -> list[int]:
         """Indices of the entries that fold inside their image, by r_fold / r_corner."""
-        m = self.metrics
-        ratio = np.minimum(m["r_fold_red"], m["r_fold_blue"]) / m["r_corner"]
-        rows = [i for i, ok in enumerate(self.audited) if ok and m["folds_in_image"][i]]
+        ratio = self.ratios()
+        folds = self.metrics["folds_in_image"]
+        rows = [i for i, ok in enumerate(self.audited) if ok and folds[i]]
         return sorted(rows, key=lambda i: (ratio[i], self.entries[i].file, self.entries[i].line))
+
+    def nearest(self) -> int | None:
+        """Index of the audited entry whose fold is nearest its image (None: none folds)."""
+        ratio = self.ratios()
+        finite = [i for i, ok in enumerate(self.audited) if ok and np.isfinite(ratio[i])]
+        return min(finite, key=lambda i: (ratio[i], i)) if finite else None
 
     def summary(self) -> dict[str, Any]:
         summary = super().summary()
@@ -185,10 +197,17 @@ class TCAAudit(CalibrationAudit):
             if ok:
                 models[entry.model] = models.get(entry.model, 0) + 1
         folding = self.folding()
+        nearest = self.nearest()
         summary.update(
             models=models,
             folds_in_image=len(folding),
             folding=[f"{self.entries[i].file}:{self.entries[i].line}" for i in folding],
+            nearest_fold=None
+            if nearest is None
+            else {
+                "where": f"{self.entries[nearest].file}:{self.entries[nearest].line}",
+                "r_fold_over_r_corner": float(self.ratios()[nearest]),
+            },
         )
         return summary
 
@@ -207,6 +226,13 @@ class TCAAudit(CalibrationAudit):
             "TCA r_d = r (b r^2 + c r + v) per channel, Hugin units (corner at hypot(aspect, 1))",
             f"Entries with a channel that folds inside the image: {summary['folds_in_image']}",
         ]
+        nearest = self.nearest()
+        if nearest is not None:
+            entry = self.entries[nearest]
+            out.append(
+                f"Nearest fold: {self.ratios()[nearest]:.3g} times the image radius "
+                f"({entry.lens} at {entry.focal:g} mm, {entry.file}:{entry.line})"
+            )
         folding = self.folding()
         if folding:
             m = self.metrics
