@@ -210,11 +210,10 @@ def _repository_path(worktree: Path, display: str) -> str:
         return display
 
 
-def judge(
-    repository: Path, worktree: Path, commit: str, parent: str, margin: float = 1.1
-) -> tuple[str, list[str]]:
-    """Check the checked-out ``commit`` against ``parent``; the verdict and the
-    failing findings (``!`` marks one that the diff does not justify)."""
+def judge(worktree: Path, commit: str, parent: str, margin: float = 1.1) -> tuple[str, list[str]]:
+    """Check ``commit``, checked out in the git work tree ``worktree``, against
+    ``parent``: the verdict and the failing findings (``!`` marks one that
+    the diff does not justify)."""
     try:
         result = check(worktree / DB_DIR, baseline=parent, margin=margin)
     except LoadError as error:
@@ -222,7 +221,7 @@ def judge(
     failing = [f for f in result.findings if f.fails]
     if not failing:
         return PASS, []
-    touched = touched_files(repository, parent, commit)
+    touched = touched_files(worktree, parent, commit)
     blocks: dict[str, list[tuple[int, int]]] = {}
     for name in touched:
         try:
@@ -233,6 +232,7 @@ def judge(
     described = []
     for finding in failing:
         locations = [(finding.file, finding.line)]
+        # A finding without related places (an earlier check) is judged by its own line.
         locations += [tuple(r) for r in getattr(finding, "related", ())]
         locations = [(_repository_path(worktree, f), line) for f, line in locations]
         ok = justified(locations, finding.code in FILE_LEVEL_CODES, touched, blocks)
@@ -264,7 +264,7 @@ def replay(repository: Path, commits: Sequence[str], margin: float = 1.1) -> Ite
             if not parents:
                 continue  # the first commit has nothing to compare with
             git(worktree, "checkout", "--quiet", "--force", "--detach", commit)
-            verdict, findings = judge(worktree, worktree, commit, parents[0], margin)
+            verdict, findings = judge(worktree, commit, parents[0], margin)
             yield Row(commit, subject, verdict, findings, time.perf_counter() - started)
 
 
