@@ -8,8 +8,10 @@ with sympy. Nothing here is computed by the code under test.
 
 from __future__ import annotations
 
+import io
 import math
 import os
+import re
 import subprocess
 import warnings
 from decimal import Decimal
@@ -577,3 +579,81 @@ def test_the_short_path_gives_the_record_the_full_examination_gives(model, attri
     fast = calibrations._entry(spec, element, "x.xml", context)
     full = calibrations._checked_entry(spec, element, "x.xml", context)
     assert repr(fast) == repr(full)
+
+
+# --- mutated real files: no crash, no warning, every element once ----------
+
+FUZZ_FILES = ("actioncams.xml", "slr-vivitar.xml")
+FUZZ_VALUES = ["", "0", "-1", "1e308", "-1e308", "1e-320", "1e999", "nan", "inf", "abc", "1,5"]
+FUZZ_VALUES += [" 2 ", "1_0", "\u0661", "9" * 400, "pa", "poly3", "linear", "acm", "none"]
+_CALIBRATION_VALUE = re.compile(rb'<(?:vignetting|tca|calibration)\b[^>]*?="([^"]*)"')
+
+
+@st.composite
+def mutated_files(draw) -> tuple[str, bytes]:
+    from lensaudit.database import bundled_database_path
+
+    name = draw(st.sampled_from(FUZZ_FILES))
+    data = (bundled_database_path() / name).read_bytes()
+    rng = draw(st.randoms(use_true_random=False))
+    for _ in range(draw(st.integers(1, 3))):
+        kind = draw(st.sampled_from(["value", "value", "line", "insert", "truncate"]))
+        if kind == "value":
+            matches = list(_CALIBRATION_VALUE.finditer(data))
+            if not matches:  # an earlier mutation removed them all
+                continue
+            match = rng.choice(matches)
+            value = draw(st.one_of(st.sampled_from(FUZZ_VALUES), st.floats().map(repr)))
+            data = data[: match.start(1)] + value.encode() + data[match.end(1) :]
+        elif kind == "line" and data:
+            lines = data.splitlines(keepends=True)
+            line = lines.pop(rng.randrange(len(lines)))
+            if draw(st.booleans()):
+                lines.insert(rng.randint(0, len(lines)), line)
+            data = b"".join(lines)
+        elif kind == "insert":
+            position = rng.randint(0, len(data))
+            text = draw(st.text(st.sampled_from(list('<>/="&; abc1.')), min_size=1, max_size=6))
+            data = data[:position] + text.encode() + data[position:]
+        elif kind == "truncate":
+            data = data[: rng.randint(0, len(data))]
+    return name, data
+
+
+def _well_formed(data: bytes) -> bool:
+    import xml.parsers.expat
+
+    parser = xml.parsers.expat.ParserCreate()
+    try:
+        parser.Parse(data, True)
+    except xml.parsers.expat.ExpatError:
+        return False
+    return True
+
+
+@pytest.mark.filterwarnings("error")
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(mutated_files())
+def test_a_mutated_file_never_crashes_and_every_element_is_one_record(mutated):
+    from lensaudit import tca
+
+    name, data = mutated
+    vignetting_records, tca_records, error = calibrations.read_bytes(data, name)
+    for records, audit_entries, module in (
+        (vignetting_records, vignetting.audit_entries, vignetting),
+        (tca_records, tca.audit_entries, tca),
+    ):
+        audit = audit_entries(records)
+        module.findings(audit.records())
+        audit.write_csv(io.StringIO())
+        audit.write_json(io.StringIO())
+        audit.write_table(io.StringIO())
+    if not _well_formed(data):
+        assert error and vignetting_records[0].status == tca_records[0].status == "xml_error"
+        return
+    root = etree.fromstring(data)
+    head = 1 if root.tag != "lensdatabase" else 0
+    for tag, records in (("vignetting", vignetting_records), ("tca", tca_records)):
+        lines = [element.sourceline for element in root.iter(tag)]
+        assert [r.line for r in records[head:]] == lines
+        assert all(r.status != "xml_error" for r in records)
