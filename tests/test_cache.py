@@ -7,8 +7,10 @@ import hashlib
 import marshal
 import math
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from array import array
@@ -25,6 +27,7 @@ from conftest import lens_xml
 from lensaudit import loader
 from lensaudit.cache import ParseCache, cache_dir, pack_entries, unpack_entries
 from lensaudit.cli import main
+from lensaudit.formats import csv_format, json_format
 from lensaudit.loader import DistortionEntry
 from lensaudit.pipeline import run
 
@@ -208,6 +211,101 @@ def test_any_entries_come_back_from_a_record_unchanged(entries):
 
     record = marshal.loads(marshal.dumps(pack_entries(entries)))
     assert list(map(exact, unpack_entries(record, "x.xml"))) == list(map(exact, entries))
+
+
+# --- rows rendered by the output formats -------------------------------------------------
+
+FORMATS = ("table", "csv", "json")
+
+
+def scan_output(paths: list[Path], output_format: str, cache: Path, *options: str) -> str:
+    """What `lensaudit scan PATHS -f FORMAT` prints, with the cache in ``cache``."""
+    result = CliRunner().invoke(
+        main,
+        ["scan", *map(str, paths), "-f", output_format, *options],
+        env={"LENSAUDIT_CACHE_DIR": str(cache)},
+    )
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.data())
+def test_cached_rows_give_the_uncached_output_in_every_format(bundled_db, data):
+    files = sorted(bundled_db.glob("*.xml"))
+    chosen = data.draw(st.lists(st.sampled_from(files), min_size=1, max_size=4, unique=True))
+    order = data.draw(st.permutations(FORMATS))
+    with tempfile.TemporaryDirectory() as scratch:
+        database = Path(scratch, "db")
+        database.mkdir()
+        for file in chosen:
+            shutil.copy(file, database / file.name)
+        cache = Path(scratch, "cache")
+        uncached = {f: scan_output([database], f, cache, "--no-cache") for f in FORMATS}
+        assert not cache.exists()
+        for output_format in order:  # parsed, or taken from the cache with rows added
+            assert scan_output([database], output_format, cache) == uncached[output_format]
+        for output_format in order:  # every format's rows from the cache
+            assert scan_output([database], output_format, cache) == uncached[output_format]
+
+
+def test_a_warm_scan_renders_no_row(small_db, cache_dir_path, monkeypatch):
+    first = {f: scan_output([small_db], f, cache_dir_path) for f in ("csv", "json")}
+
+    def fail(*arguments):
+        raise AssertionError("rendered again")
+
+    for module in (csv_format, json_format):
+        monkeypatch.setattr(module, "row_texts", fail)
+        monkeypatch.setattr(module, "rows", fail)
+    assert {f: scan_output([small_db], f, cache_dir_path) for f in ("csv", "json")} == first
+
+
+def test_rows_rendered_for_one_file_name_do_not_serve_another(write_xml, cache_dir_path):
+    path = write_xml(lens_xml(POLY3.format(k1="-0.1")), "a.xml")
+    by_directory = scan_output([path.parent], "csv", cache_dir_path)
+    by_file = scan_output([path], "csv", cache_dir_path)  # the same file: the same cache file
+    assert len(cache_files(cache_dir_path)) == 1
+    assert by_directory.splitlines()[1].startswith("a.xml,")
+    assert by_file.splitlines()[1].startswith(f"{path},")
+    assert by_file == scan_output([path], "csv", cache_dir_path, "--no-cache")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.data())
+def test_any_flipped_bytes_in_a_cache_with_rows_give_the_uncached_output(small_db, data):
+    directory = Path(os.environ["LENSAUDIT_CACHE_DIR"])
+    uncached = {f: scan_output([small_db], f, directory, "--no-cache") for f in ("csv", "json")}
+    for stale in directory.glob("parsed-*"):
+        stale.unlink()
+    for output_format in ("csv", "json"):
+        scan_output([small_db], output_format, directory)
+    path = the_cache_file(directory)
+    original = path.read_bytes()
+    damaged = bytearray(original)
+    for position, mask in data.draw(
+        st.lists(
+            st.tuples(st.integers(0, len(original) - 1), st.integers(1, 255)),
+            min_size=1,
+            max_size=4,
+        )
+    ):
+        damaged[position] ^= mask
+    path.write_bytes(damaged)
+    for output_format in ("csv", "json"):
+        assert scan_output([small_db], output_format, directory) == uncached[output_format]
+
+
+@pytest.mark.parametrize(
+    "module", ["pipeline.py", "formats/csv_format.py", "formats/json_format.py"]
+)
+def test_the_code_digest_changes_with_the_code_that_renders_rows(tmp_path, module):
+    package = tmp_path / "lensaudit"
+    shutil.copytree(Path(cache_module.__file__).parent, package)
+    before = cache_module._code_digest(package)
+    with (package / module).open("a") as stream:
+        stream.write("\n# an edit\n")
+    assert cache_module._code_digest(package) != before
 
 
 # --- never stale ------------------------------------------------------------------------

@@ -9,13 +9,21 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import lens_xml
+from lensaudit.cache import pack_entries
 from lensaudit.cli import main
-from lensaudit.pipeline import COLUMNS
+from lensaudit.columns import METRIC_FLOAT_COLUMNS
+from lensaudit.database import DatabaseSource
+from lensaudit.formats import json_format, writer
+from lensaudit.loader import DistortionEntry, SourceFile
+from lensaudit.pipeline import COLUMNS, Audit, FileColumns, run
 
 EXPECTED_HEADER = (
     "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,real_focal,"
@@ -244,3 +252,181 @@ def test_a_distortion_scan_does_no_vignetting_or_tca_work(tmp_path):
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+# --- the writers render rows column by column and file by file: the same text as
+# --- writing every record with the csv and json modules ----------------------------------
+
+# Texts as XML can hold them (no NUL, no lone surrogate), with the characters
+# that need quoting or escaping in CSV and JSON.
+xml_texts = st.text(
+    alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\0"),
+    max_size=8,
+) | st.sampled_from(["", "ok", 'a "b", c', "line\nbreak", "cr\rhere", "Zeiß", "ü\u2028"])
+any_floats = st.floats(allow_nan=True, allow_infinity=True)
+
+
+SOME_PROBLEMS = st.sampled_from(["ok", "ok", "bad_value", "xml_error"])
+
+
+@st.composite
+def audits(draw, statuses=SOME_PROBLEMS) -> Audit:
+    """An audit of 0 to 3 files of 0 to 3 entries each, with any metrics, held either
+    as entries or as packed columns per file (the two forms the writers meet)."""
+    files, per_file = [], []
+    for number in range(draw(st.integers(0, 3))):
+        name = draw(xml_texts) or f"{number}.xml"
+        entries = draw(
+            st.lists(
+                st.builds(
+                    DistortionEntry,
+                    file=st.just(name),
+                    line=st.integers(0, 10**6),
+                    maker=xml_texts,
+                    lens=xml_texts,
+                    mounts=st.lists(xml_texts, max_size=2).map(tuple),
+                    type=st.sampled_from(["rectilinear", "fisheye"]) | xml_texts,
+                    crop_factor=any_floats,
+                    aspect_ratio=any_floats,
+                    model=st.sampled_from(["ptlens", "poly3", "poly5", "acm", ""]),
+                    focal=any_floats,
+                    real_focal=any_floats,
+                    a=any_floats,
+                    b=any_floats,
+                    c=any_floats,
+                    k1=any_floats,
+                    k2=any_floats,
+                    status=statuses,
+                    message=xml_texts,
+                ),
+                max_size=3,
+            )
+        )
+        files.append(SourceFile(name, Path("/db", f"{number}.xml"), len(entries), ""))
+        per_file.append(entries)
+    size = sum(map(len, per_file))
+    metrics = {name: draw(st.lists(any_floats, min_size=size, max_size=size)) for name in
+               METRIC_FLOAT_COLUMNS}  # fmt: skip
+    metrics["tail"] = draw(st.lists(st.sampled_from([-1, 0, 1]), min_size=size, max_size=size))
+    metrics["folds_in_image"] = draw(
+        st.lists(st.sampled_from([0, 1]), min_size=size, max_size=size)
+    )
+    source = DatabaseSource((Path("/db"),), draw(xml_texts))
+    if draw(st.booleans()):
+        entries = [entry for group in per_file for entry in group]
+        return Audit(source, files, entries, metric_columns=metrics)
+    parts = [FileColumns(pack_entries(group), len(group)) for group in per_file]
+    return Audit(source, files, metric_columns=metrics, parts=parts)
+
+
+def csv_field(value) -> str:
+    if value is None or isinstance(value, bool):
+        return {None: "", True: "true", False: "false"}[value]
+    if isinstance(value, float):
+        return "" if math.isnan(value) else repr(value)
+    return str(value)
+
+
+def csv_by_the_csv_module(audit: Audit) -> str:
+    """Every record through csv.writer: fields quoted where they hold a comma, a quote
+    or a line break (a line terminator of CR LF makes it quote a CR too)."""
+    lines = [",".join(COLUMNS)]
+    for record in audit.records():
+        buffer = io.StringIO()
+        csv.writer(buffer, lineterminator="\r\n").writerow(map(csv_field, record.values()))
+        lines.append(buffer.getvalue()[: -len("\r\n")])
+    return "\n".join(lines) + "\n"
+
+
+@settings(max_examples=150, deadline=None)
+@given(audits())
+def test_csv_is_what_the_csv_module_writes_of_every_record(audit):
+    written = io.StringIO()
+    writer("csv")(audit, written)
+    assert written.getvalue() == csv_by_the_csv_module(audit)
+
+
+@settings(max_examples=150, deadline=None)
+@given(audits())
+def test_json_is_what_json_dump_writes_of_the_document(audit):
+    written = io.StringIO()
+    writer("json")(audit, written)
+    expected = json.dumps(json_format.document(audit), indent=1, allow_nan=False) + "\n"
+    assert written.getvalue() == expected
+
+
+def test_csv_of_the_bundled_database_is_what_the_csv_module_writes(bundled_db):
+    audit = run(bundled_db, formats=("csv",))
+    written = io.StringIO()
+    writer("csv")(audit, written)
+    assert written.getvalue() == csv_by_the_csv_module(audit)
+
+
+def test_json_of_the_bundled_database_is_what_json_dump_writes(bundled_db):
+    audit = run(bundled_db, formats=("json",))
+    written = io.StringIO()
+    writer("json")(audit, written)
+    expected = json.dumps(json_format.document(audit), indent=1, allow_nan=False) + "\n"
+    assert written.getvalue() == expected
+
+
+# --- the summary, counted without numpy, against a count with numpy ------------------------
+
+
+def counted_with_numpy(audit: Audit) -> dict:
+    """Tables 1 and 2 and the folding entries, counted on arrays."""
+    import numpy as np
+
+    model = np.array(audit.column("model"), dtype=object)
+    rectilinear = np.array(audit.column("type"), dtype=object) == "rectilinear"
+    audited = np.array(audit.column("status"), dtype=object) == "ok"
+    columns = audit.metric_columns()
+    r_max = np.array(columns["r_max"], dtype=float)
+    tail = np.array(columns["tail"])
+    folds = np.array(columns["folds_in_image"], dtype=bool)
+    r_normalized = np.array(columns["r_normalized"], dtype=float)
+    finite = audited & np.isfinite(r_max)
+    rows = []
+    for name in ("ptlens", "poly3", "poly5", None):
+        mine = audited if name is None else audited & (model == name)
+        rows.append(
+            [
+                int((mine & finite).sum()),
+                int((mine & ~finite).sum()),
+                int((mine & finite & (tail > 0)).sum()),
+                int((mine & finite & (tail < 0)).sum()),
+            ]
+        )
+    folding = np.flatnonzero(folds)
+    folding = folding[np.argsort(r_normalized[folding], kind="stable")]
+    with np.errstate(invalid="ignore"):
+        paper = finite & rectilinear & (np.array(columns["r_normalized_paper"]) < 1)
+    return {
+        "rows": rows,
+        "audited": int(audited.sum()),
+        "folding": folding.tolist(),
+        "folding_rectilinear": int((folds & rectilinear).sum()),
+        "paper": int(paper.sum()),
+    }
+
+
+def counted_in_the_summary(audit: Audit) -> dict:
+    summary = audit.summary
+    return {
+        "rows": [[r.finite, r.infinite, r.positive, r.negative] for r in summary.rows],
+        "audited": summary.audited,
+        "folding": summary.folding,
+        "folding_rectilinear": summary.folding_rectilinear,
+        "paper": summary.folding_paper_units_rectilinear,
+    }
+
+
+@settings(max_examples=200, deadline=None)
+@given(audits(statuses=st.sampled_from(["ok", "ok", "ok", "unknown_model"])))
+def test_the_summary_counts_what_numpy_counts(audit):
+    assert counted_in_the_summary(audit) == counted_with_numpy(audit)
+
+
+def test_the_summary_of_the_bundled_database_counts_what_numpy_counts(bundled_db):
+    audit = run(bundled_db)
+    assert counted_in_the_summary(audit) == counted_with_numpy(audit)

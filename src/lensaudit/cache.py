@@ -93,14 +93,13 @@ _SEPARATOR = "\0"
 _CODE = ("*.py", "formats/*.py")
 
 
-def _code_digest() -> str:
+def _code_digest(package: Path = Path(__file__).parent) -> str:
     """Digest of the package's top-level modules and output formats.
 
     All of them, not a chosen few: a module the loader, the metrics or a
     format start to rely on must not be forgotten here.
     """
     digest = blake2b(digest_size=16)
-    package = Path(__file__).parent
     for module in sorted(path for pattern in _CODE for path in package.glob(pattern)):
         try:
             name = module.relative_to(package).as_posix()

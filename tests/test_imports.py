@@ -1,0 +1,103 @@
+"""What each command imports, in a fresh interpreter: heavy modules only where needed,
+and modules that depend on each other one way only."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HEAVY = ("numpy", "pandas", "matplotlib", "scipy", "lxml")
+
+# Runs the command line in this interpreter, then prints the heavy modules it imported.
+RUN_AND_LIST = (
+    "import json, sys\n"
+    "from lensaudit.cli import main\n"
+    "try:\n"
+    "    main(sys.argv[1:])\n"
+    "except SystemExit as end:\n"
+    "    assert not end.code, end.code\n"
+    f"print(json.dumps(sorted(m for m in {HEAVY!r} if m in sys.modules)))\n"
+)
+
+
+def imported_by(arguments: list[str], cache_dir: Path) -> set[str]:
+    """The heavy modules a fresh `lensaudit ARGUMENTS` has imported when it ends."""
+    env = dict(os.environ, LENSAUDIT_CACHE_DIR=str(cache_dir))
+    done = subprocess.run(
+        [sys.executable, "-c", RUN_AND_LIST, *arguments],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return set(json.loads(done.stdout.splitlines()[-1]))
+
+
+def imported_modules(statement: str) -> set[str]:
+    """Every module a fresh interpreter has imported after ``statement``."""
+    code = f"import json, sys\n{statement}\nprint(json.dumps(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return set(json.loads(done.stdout))
+
+
+@pytest.fixture
+def cache_dir(tmp_path: Path) -> Path:
+    return tmp_path / "cache"
+
+
+@pytest.mark.parametrize("output_format", ["table", "csv", "json"])
+def test_a_scan_never_imports_pandas_or_matplotlib(cache_dir, output_format):
+    found = imported_by(["scan", "-f", output_format, "-o", os.devnull], cache_dir)
+    assert {"numpy", "lxml"} <= found  # parsed and audited: the check can fail
+    assert not found & {"pandas", "matplotlib", "scipy"}
+
+
+@pytest.mark.parametrize("output_format", ["table", "csv", "json"])
+def test_a_warm_scan_imports_no_heavy_module(cache_dir, output_format):
+    arguments = ["scan", "-f", output_format, "-o", os.devnull]
+    imported_by(arguments, cache_dir)  # fills the cache
+    assert imported_by(arguments, cache_dir) == set()
+
+
+def test_a_warm_scan_in_another_format_imports_no_heavy_module(cache_dir):
+    imported_by(["scan", "-f", "csv", "-o", os.devnull], cache_dir)
+    assert imported_by(["scan", "-f", "json", "-o", os.devnull], cache_dir) == set()
+
+
+@pytest.mark.parametrize("command", ["scan", "report", "plot", "check", "history", "project"])
+def test_help_imports_no_plotting_or_data_frames(cache_dir, command):
+    found = imported_by([command, "--help"], cache_dir)
+    assert not found & {"pandas", "matplotlib"}
+
+
+def test_report_help_imports_no_heavy_module(cache_dir):
+    assert imported_by(["report", "--help"], cache_dir) == set()
+
+
+def test_the_cache_does_not_import_the_pipeline():
+    found = imported_modules("import lensaudit.cache")
+    assert "lensaudit.cache" in found and "lensaudit.pipeline" not in found
+
+
+def test_the_summary_does_not_import_the_pipeline_or_numpy():
+    found = imported_modules("import lensaudit.summary")
+    assert "lensaudit.summary" in found
+    assert not found & {"lensaudit.pipeline", "lensaudit.cache", "numpy"}
+
+
+def test_the_output_formats_do_not_import_the_pipeline():
+    found = imported_modules(
+        "import lensaudit.formats.csv_format, lensaudit.formats.json_format, "
+        "lensaudit.formats.table"
+    )
+    assert "lensaudit.formats.json_format" in found and "lensaudit.pipeline" not in found
+
+
+def test_the_column_names_import_no_other_lensaudit_module():
+    found = imported_modules("import lensaudit.columns")
+    assert {m for m in found if m.startswith("lensaudit")} == {"lensaudit", "lensaudit.columns"}
