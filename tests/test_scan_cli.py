@@ -9,6 +9,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import astuple
 from pathlib import Path
 
 import pytest
@@ -430,3 +431,17 @@ def test_the_summary_counts_what_numpy_counts(audit):
 def test_the_summary_of_the_bundled_database_counts_what_numpy_counts(bundled_db):
     audit = run(bundled_db)
     assert counted_in_the_summary(audit) == counted_with_numpy(audit)
+
+
+@settings(max_examples=100, deadline=None)
+@given(audits(), st.integers(-12, 12))
+def test_one_entry_of_an_audit_is_that_of_its_entries(audit, index):
+    def exact(entry):  # NaN made equal to itself
+        return tuple(repr(v) if isinstance(v, float) else v for v in astuple(entry))
+
+    entries = [exact(e) for e in audit.entries]
+    if -len(entries) <= index < len(entries):
+        assert exact(audit.entry(index)) == entries[index]
+    else:
+        with pytest.raises(IndexError):
+            audit.entry(index)

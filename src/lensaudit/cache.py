@@ -387,7 +387,8 @@ class ParseCache:
     """
 
     def __init__(self, paths: list[Path], directory: Path | None = None) -> None:
-        """The cache of the set of files ``paths`` (in :func:`cache_dir` by default)."""
+        """The cache of the set of files ``paths``, resolved (as
+        :func:`lensaudit.loader.expand` gives them), in :func:`cache_dir` by default."""
         # path (os.fsencode of the absolute path) -> record
         self._records: dict[bytes, _Record] = {}
         self._seen: set[bytes] = set()
@@ -397,7 +398,7 @@ class ParseCache:
             return
         try:
             # os.fsencode keeps file names that are not UTF-8 (surrogate escapes) as bytes.
-            key = b"\0".join(sorted(os.fsencode(p.resolve()) for p in paths))
+            key = b"\0".join(sorted(map(os.fsencode, paths)))
             name = blake2b(key, digest_size=8).hexdigest()
             self.path = (directory or cache_dir()) / f"{_PREFIX}{name}{_SUFFIX}"
         except (OSError, RuntimeError, ValueError):

@@ -619,9 +619,14 @@ def xml_files(path: Path) -> list[Path]:
     ``*.xml`` is then reported as unreadable rather than silently skipped.
     Raises ``OSError`` when the directory cannot be listed.
     """
+    return [path / name for name, _ in _xml_entries(path)]
+
+
+def _xml_entries(path: Path) -> list[tuple[str, bool]]:
+    """(name, whether it is a symbolic link) of each file :func:`xml_files` gives."""
     with os.scandir(path) as found:
         return sorted(
-            path / item.name
+            (item.name, item.is_symlink())
             for item in found
             if item.name.lower().endswith(".xml") and not item.is_dir()
         )
@@ -673,7 +678,7 @@ class EntryCache(Protocol):
 def expand(
     paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str],
 ) -> list[tuple[Path, str]]:
-    """(file, display name) for every XML file the paths designate.
+    """(resolved path, display name) for every XML file the paths designate.
 
     Directory entries are named relative to the directory given; files given
     directly keep the path as given. Raises :class:`LoadError` when a path
@@ -693,25 +698,33 @@ def expand(
             raise LoadError(f"{shown}: {_reason(error)}") from None
         if stat.S_ISDIR(mode):
             try:
-                files = xml_files(given)
+                entries = _xml_entries(given)
             except OSError as error:
                 raise LoadError(f"{shown}: cannot list directory: {_reason(error)}") from None
-            if not files:
+            if not entries:
                 raise LoadError(
                     f"{shown}: directory holds no *.xml files (give a Lensfun database "
                     "directory, a Lensfun checkout, or XML files)"
                 )
-            found = [(file, display_path(os.path.relpath(file, given))) for file in files]
+            # The directory resolved once: a file in it that is not a link
+            # resolves to the directory's real path and its own name.
+            base = os.path.realpath(given)
+            found = [
+                (
+                    os.path.realpath(given / name) if link else os.path.join(base, name),
+                    display_path(name),
+                )
+                for name, link in entries
+            ]
         elif stat.S_ISREG(mode):
-            found = [(given, shown)]
+            found = [(os.path.realpath(given), shown)]
         else:
             raise LoadError(f"{shown}: not a regular file or directory")
-        for file, name in found:
+        for real, name in found:
             # The same file named twice (db and db/x.xml, or a link) is read once.
-            real = os.path.realpath(file)
             if real not in seen:
                 seen.add(real)
-                targets.append((file, name))
+                targets.append((Path(real), name))
     return targets
 
 

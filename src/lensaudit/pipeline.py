@@ -13,9 +13,11 @@ worker processes (:mod:`lensaudit.workers`) while numpy is imported.
 from __future__ import annotations
 
 import os
+from bisect import bisect_right
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
+from itertools import accumulate
 from operator import attrgetter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -109,6 +111,7 @@ class Audit:
         self._parts = parts if entries is None else None
         self._metric_columns = metric_columns
         self._entry_columns: dict[str, list] = {}
+        self._part_entries: dict[int, list[DistortionEntry]] = {}
         if entries is not None:
             self.__dict__["entries"] = entries
         if metrics is not None:
@@ -129,6 +132,29 @@ class Audit:
         for file, part in zip(self.files, self._parts, strict=True):
             entries += unpack_entries(part.packed, file.name)
         return entries
+
+    def entry(self, index: int) -> DistortionEntry:
+        """Entry ``index`` (as ``entries[index]``), made from its file's columns alone."""
+        if self._parts is None or "entries" in self.__dict__:
+            return self.entries[index]
+        starts = self._starts
+        if not -starts[-1] <= index < starts[-1]:
+            raise IndexError("entry index out of range")
+        index %= starts[-1]
+        part = bisect_right(starts, index) - 1
+        found = self._part_entries.get(part)
+        if found is None:
+            from .cache import unpack_entries
+
+            found = unpack_entries(self._parts[part].packed, self.files[part].name)
+            self._part_entries[part] = found
+        return found[index - starts[part]]
+
+    @cached_property
+    def _starts(self) -> list[int]:
+        """Index of the first entry of each file, then the number of entries."""
+        assert self._parts is not None
+        return [0, *accumulate(part.count for part in self._parts)]
 
     @cached_property
     def metrics(self) -> metrics.Metrics:
@@ -312,8 +338,7 @@ def _audit_files(
     digests: list[bytes | None] = [None] * size
     cached_rows: list[frozenset[str]] = [frozenset()] * size
     jobs: list[tuple[int, Job]] = []
-    for index, (path, name) in enumerate(targets):
-        path = path.resolve()
+    for index, (path, name) in enumerate(targets):  # paths resolved by loader.expand
         data = None
         if store is not None and store.knows(path):
             from .cache import content_digest

@@ -75,30 +75,25 @@ def lines(audit: Audit) -> list[str]:
         f"(or circle, for circular fisheyes): {len(folding)}"
     )
     if folding:
-        # Columns, not entries: a warm scan then builds no entry object.
-        column = audit.column
         r_normalized = audit.metric_columns()["r_normalized"]
-        makers, lenses, focals = column("maker"), column("lens"), column("focal")
-        crops, types, files, lines_ = (
-            column("crop_factor"),
-            column("type"),
-            column("file"),
-            column("line"),
-        )
-        out += text_table(
-            ["r_normalized", "maker", "lens", "focal", "crop", "type", "where"],
-            [
+        rows = []
+        for i in folding:
+            # One entry at a time: a warm scan then builds no other entry object.
+            entry = audit.entry(i)
+            rows.append(
                 [
                     f"{r_normalized[i]:.3f}",
-                    makers[i],
-                    lenses[i],
-                    _focal(focals[i]),
-                    f"{crops[i]:g}",
-                    types[i],
-                    f"{files[i]}:{lines_[i]}",
+                    entry.maker,
+                    entry.lens,
+                    _focal(entry.focal),
+                    f"{entry.crop_factor:g}",
+                    entry.type,
+                    f"{entry.file}:{entry.line}",
                 ]
-                for i in folding
-            ],
+            )
+        out += text_table(
+            ["r_normalized", "maker", "lens", "focal", "crop", "type", "where"],
+            rows,
             right=[True, False, False, True, True, False, False],
         )
     out.append(
@@ -107,19 +102,13 @@ def lines(audit: Audit) -> list[str]:
         f"flagged instead; see column r_normalized_paper.)"
     )
 
-    statuses = audit.column("status")
-    problems = [i for i, status in enumerate(statuses) if status != "ok"]
+    problems = [i for i, status in enumerate(audit.column("status")) if status != "ok"]
     if problems:
         out.append("")
         counts = ", ".join(f"{n} {s}" for s, n in summary.statuses.items() if s != "ok")
         out.append(f"Not audited: {len(problems)} entries ({counts})")
-        files, lines_, messages = (
-            audit.column("file"),
-            audit.column("line"),
-            audit.column("message"),
-        )
-        for i in problems[:PROBLEMS_SHOWN]:
-            out.append(f"  {files[i]}:{lines_[i]}: {statuses[i]}: {messages[i]}")
+        for entry in map(audit.entry, problems[:PROBLEMS_SHOWN]):
+            out.append(f"  {entry.file}:{entry.line}: {entry.status}: {entry.message}")
         if len(problems) > PROBLEMS_SHOWN:
             out.append(
                 f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"
