@@ -77,6 +77,15 @@ _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running wri
 _MAGIC = b"lensaudit parse cache\n"
 _CHECKSUM_SIZE = 32
 _DIGEST_SIZE = 16  # of file contents: collisions by chance are out of the question
+# Opening a temporary file: it must not exist yet (nor be a link to anything).
+_CREATE_NEW = (
+    os.O_WRONLY
+    | os.O_CREAT
+    | os.O_EXCL
+    | getattr(os, "O_NOFOLLOW", 0)
+    | getattr(os, "O_CLOEXEC", 0)
+    | getattr(os, "O_BINARY", 0)
+)
 
 
 def _kind(annotation: object) -> str:
@@ -502,17 +511,17 @@ class ParseCache:
         if self.path is None or not (self._changed or stale):
             return
         kept = {k: v for k, v in self._records.items() if k in self._seen}
-        import tempfile  # only here: a warm scan writes nothing
-
         temporary = None
         try:
             body = marshal.dumps(kept)
             if len(body) > MAX_CACHE_BYTES:  # it would be evicted, and never read
                 return
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            handle, temporary = tempfile.mkstemp(
-                dir=self.path.parent, prefix=_PREFIX, suffix=_TEMPORARY_SUFFIX
-            )
+            # A new file of a random name, as tempfile.mkstemp makes one (without
+            # importing tempfile, which would add a few milliseconds to a first scan).
+            name = self.path.parent / f"{_PREFIX}{os.urandom(8).hex()}{_TEMPORARY_SUFFIX}"
+            handle = os.open(name, _CREATE_NEW, 0o600)
+            temporary = name
             with os.fdopen(handle, "wb") as stream:
                 stream.write(_MAGIC + _checksum(body))
                 stream.write(body)
