@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from conftest import lens_xml
 from lensaudit.cache import pack_entries
 from lensaudit.cli import main
-from lensaudit.columns import METRIC_FLOAT_COLUMNS
+from lensaudit.columns import METRIC_FLOAT_COLUMNS, format_floats
 from lensaudit.database import DatabaseSource
 from lensaudit.formats import json_format, writer
 from lensaudit.loader import DistortionEntry, SourceFile
@@ -445,3 +445,16 @@ def test_one_entry_of_an_audit_is_that_of_its_entries(audit, index):
     else:
         with pytest.raises(IndexError):
             audit.entry(index)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.sampled_from([0.0, -0.0, 1.5, math.inf, -math.inf, 1e-300]) | any_floats,
+        max_size=40,
+    )
+)
+def test_floats_are_written_as_their_shortest_repr_or_empty(values):
+    expected = ["" if math.isnan(v) else repr(v) for v in values]
+    assert format_floats(values) == expected
+    assert format_floats(values * 5) == expected * 5  # repeated: written once per value

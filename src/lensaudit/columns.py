@@ -69,9 +69,20 @@ def format_float(value: float) -> str:
     return "" if text == "nan" else text
 
 
+def float_texts(values: list[float]) -> list[str]:
+    """``repr`` of each float (shortest round-trip, ``inf``, ``nan``), at C speed."""
+    distinct = dict.fromkeys(values)
+    # A column of few values (an image corner, a crop factor) is written once
+    # per value. Not with a zero in it: 0.0 and -0.0 are one key, two texts.
+    if 4 * len(distinct) <= len(values) and 0.0 not in distinct:
+        known = {value: repr(value) for value in distinct}
+        return list(map(known.__getitem__, values))
+    return list(map(repr, values))
+
+
 def format_floats(values: list[float]) -> list[str]:
     """:func:`format_float` over a list, at C speed for the common case."""
-    texts = list(map(repr, values))
+    texts = float_texts(values)
     if "nan" in texts:
         texts = ["" if text == "nan" else text for text in texts]
     return texts

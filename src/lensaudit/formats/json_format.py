@@ -25,6 +25,7 @@ from ..columns import (
     METRIC_COLUMNS,
     TAIL_NAMES,
     TRAILING_COLUMNS,
+    float_texts,
 )
 from ..loader import STATUS_OK
 
@@ -60,7 +61,7 @@ def _clean(value: Any) -> Any:
 
 def _floats(values: list[float]) -> list[str]:
     # float.__repr__ is what json writes for a finite float.
-    texts = list(map(repr, values))
+    texts = float_texts(values)
     if "nan" in texts or "inf" in texts or "-inf" in texts:
         texts = [_SPECIAL_FLOATS.get(text, text) for text in texts]
     return texts
