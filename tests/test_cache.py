@@ -249,6 +249,23 @@ def test_cached_rows_give_the_uncached_output_in_every_format(bundled_db, data):
             assert scan_output([database], output_format, cache) == uncached[output_format]
 
 
+@pytest.mark.parametrize("output_format", ["csv", "json"])
+def test_rows_of_a_changed_file_are_rendered_beside_cached_ones(
+    bundled_db, tmp_path, output_format
+):
+    database = tmp_path / "db"
+    database.mkdir()
+    for name in ("slr-tokina.xml", "slr-sigma.xml", "mil-olympus.xml"):
+        shutil.copy(bundled_db / name, database / name)
+    cache = tmp_path / "cache"
+    scan_output([database], output_format, cache)
+    changed = database / "slr-tokina.xml"  # the fewest entries: the others keep their rows
+    changed.write_text(changed.read_text().replace('k1="', 'k1="-', 3))
+    assert scan_output([database], output_format, cache) == scan_output(
+        [database], output_format, cache, "--no-cache"
+    )
+
+
 def test_a_warm_scan_renders_no_row(small_db, cache_dir_path, monkeypatch):
     first = {f: scan_output([small_db], f, cache_dir_path) for f in ("csv", "json")}
 

@@ -236,30 +236,36 @@ class Audit:
         from .formats import row_format
 
         module = row_format(format_name)
-        metrics = self.metric_columns()
-        statuses = self._entry_column("status")
         if self._parts is None:
             leading, trailing = module.row_texts(
                 {name: self._entry_column(name) for name in _ROW_ENTRY_COLUMNS}
             )
-            yield module.rows(leading, trailing, metrics, statuses)
+            metrics = module.metric_texts(self.metric_columns(), self._entry_column("status"))
+            yield module.rows(leading, metrics, trailing)
             return
-        start = 0
-        for file, part in zip(self.files, self._parts, strict=True):
-            end = start + part.count
+        starts = self._starts
+        missing = [i for i, part in enumerate(self._parts) if format_name not in part.rows]
+        every = None  # every entry's metric text, when most files need rows
+        if 2 * sum(starts[i + 1] - starts[i] for i in missing) >= starts[-1]:
+            every = module.metric_texts(self.metric_columns(), self._entry_column("status"))
+        for index, (file, part) in enumerate(zip(self.files, self._parts, strict=True)):
             text = part.rows.get(format_name)
             if text is None:
+                start, end = starts[index], starts[index + 1]
+                if every is not None:
+                    metrics = every[start:end]
+                else:
+                    metrics = module.metric_texts(
+                        {k: v[start:end] for k, v in self.metric_columns().items()},
+                        self._entry_column("status")[start:end],
+                    )
                 texts = part.row_texts.pop(format_name, None)
                 if texts is None:
                     texts = module.row_texts(_unpacked(part, file.name, _ROW_ENTRY_COLUMNS))
-                text = module.rows(
-                    *texts,
-                    {name: values[start:end] for name, values in metrics.items()},
-                    statuses[start:end],
-                )
+                leading, trailing = texts
+                text = module.rows(leading, metrics, trailing)
                 part.rows[format_name] = text
             yield text
-            start = end
 
     @cached_property
     def summary(self) -> Summary:

@@ -2,9 +2,9 @@
 
 Formats that write a row per entry (:data:`ROW_FORMATS`) also render them
 file by file: ``row_texts(columns)`` gives each row's text before and after
-its metrics, ``rows(leading, trailing, metrics, statuses)`` whole rows, and
-``join(texts)`` the rows of several files as one text (see
-:meth:`lensaudit.pipeline.Audit.rows`).
+its metrics, ``metric_texts(metrics, statuses)`` that of its metrics,
+``rows(leading, metrics, trailing)`` whole rows, and ``join(texts)`` the rows
+of several files as one text (see :meth:`lensaudit.pipeline.Audit.rows`).
 """
 
 from __future__ import annotations

@@ -4,11 +4,12 @@ Floats are written in shortest round-trip form, ``inf`` for infinite values
 and empty for values that do not apply; booleans as ``true``/``false``. Text
 is quoted as RFC 4180 says (only where it holds a comma, quote or line break).
 
-Rows are rendered file by file, in two steps: the text an entry gives
-(:func:`row_texts`, which needs no metrics, so that it can be done while
-files are still being parsed), then whole rows with the metrics
-(:func:`rows`). The audit keeps each file's rows, and the parse cache stores
-them, so that an unchanged database is written by concatenation.
+Rows are rendered file by file: the text an entry gives (:func:`row_texts`,
+which needs no metrics, so that it can be done while files are still being
+parsed), joined with the text of its metrics (:func:`metric_texts`) into
+whole rows (:func:`rows`). The audit keeps each file's rows, and the parse
+cache stores them, so that an unchanged database is written by
+concatenation.
 """
 
 from __future__ import annotations
@@ -65,15 +66,10 @@ def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     )
 
 
-def rows(
-    leading: list[str], trailing: list[str], metrics: dict[str, list], statuses: list[str]
-) -> str:
-    """Whole rows, each ending in a line break: ``leading`` and ``trailing`` from
-    :func:`row_texts`, the metric columns of the same entries, and their statuses
-    (an entry that was not audited has no ``folds_in_image``)."""
-    if not leading:
-        return ""
-    fields: list[list[str]] = [leading]
+def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
+    """Each entry's metric fields, from the metric columns and the statuses (an
+    entry that was not audited has no ``folds_in_image``)."""
+    fields: list[list[str]] = []
     for name in METRIC_COLUMNS:
         values = metrics[name]
         if name == "tail":
@@ -87,8 +83,15 @@ def rows(
             )
         else:
             fields.append(format_floats(values))
-    fields.append(trailing)
-    return "\n".join(map(",".join, zip(*fields, strict=True))) + "\n"
+    return list(map(",".join, zip(*fields, strict=True)))
+
+
+def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:
+    """Whole rows, each ending in a line break, from :func:`row_texts` and
+    :func:`metric_texts` of the same entries."""
+    if not leading:
+        return ""
+    return "\n".join(map(",".join, zip(leading, metrics, trailing, strict=True))) + "\n"
 
 
 def join(texts: list[str]) -> str:

@@ -6,8 +6,9 @@ that do not apply as ``null``, so that the output is strict JSON.
 The text is exactly what ``json.dump(document(audit), stream, indent=1)``
 writes, but the entries are rendered column by column and file by file, as
 the CSV rows are (see :mod:`lensaudit.formats.csv_format`): per entry, the
-text before its metrics (:func:`row_texts`), then whole entries
-(:func:`rows`), which the audit keeps and the parse cache stores.
+text before and after its metrics (:func:`row_texts`) and that of its
+metrics (:func:`metric_texts`), joined into whole entries (:func:`rows`),
+which the audit keeps and the parse cache stores.
 """
 
 from __future__ import annotations
@@ -98,12 +99,9 @@ def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     )
 
 
-def rows(
-    leading: list[str], trailing: list[str], metrics: dict[str, list], statuses: list[str]
-) -> str:
-    """Whole entries, separated by ",\\n": ``leading`` and ``trailing`` from
-    :func:`row_texts`, the metric columns of the same entries, and their
-    statuses (an entry that was not audited has no ``folds_in_image``)."""
+def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
+    """Each entry's metric items, from the metric columns and the statuses (an
+    entry that was not audited has no ``folds_in_image``)."""
     fields: list[list[str]] = []
     for name in METRIC_COLUMNS:
         values = metrics[name]
@@ -118,8 +116,13 @@ def rows(
             )
         else:
             fields.append(_floats(values))
-    middle = map(_METRICS.__mod__, zip(*fields, strict=True))
-    return ",\n".join(map("".join, zip(leading, middle, trailing, strict=True)))
+    return list(map(_METRICS.__mod__, zip(*fields, strict=True)))
+
+
+def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:
+    """Whole entries, separated by ",\\n", from :func:`row_texts` and
+    :func:`metric_texts` of the same entries."""
+    return ",\n".join(map("".join, zip(leading, metrics, trailing, strict=True)))
 
 
 def join(texts: list[str]) -> str:
