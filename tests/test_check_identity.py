@@ -119,6 +119,13 @@ def test_editing_one_entry_of_a_known_duplicate_focal_keeps_the_duplicate_known(
     assert [(f.code, f.known) for f in result.findings] == [("duplicate-focal", True)]
 
 
+def test_a_known_duplicate_focal_stays_known_when_its_lens_gets_an_aspect_ratio(tmp_path):
+    before = xml(lens("Lens B", FINE, FINE.replace("0.01", "0.02")))
+    after = before.replace("</mount>", "</mount><aspect-ratio>4:3</aspect-ratio>")
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert [(f.code, f.known) for f in result.findings] == [("duplicate-focal", True)]
+
+
 def test_editing_a_known_duplicate_lens_keeps_the_duplicate_known(tmp_path):
     before = xml(lens("Lens A", FINE), lens("Lens A", FOLDING.replace("-0.3", "0.02")))
     after = xml(

@@ -968,10 +968,10 @@ def _duplicate_focals(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]
             # The pair, in either order (a reordering may swap which comes
             # first), of the lens by name; then the pair alone, when the lens
             # was renamed; then the lens and focal length, when one of the
-            # pair was edited.
+            # pair or the lens's crop factor or aspect ratio was edited.
             pair = (severity, DUPLICATE_FOCAL, *sorted((content, first_content), key=repr))
             lens_name = _lens_identity(entry.maker, entry.lens)
-            keys = ((*pair, lens_name), pair, (*pair[:2], lens_name, *calibration[1:]))
+            keys = ((*pair, lens_name), pair, (severity, DUPLICATE_FOCAL, lens_name, entry.focal))
             yield index, Identified(finding, keys, (file.source.file_name,))
 
 
