@@ -67,6 +67,7 @@ def check(
     Errors (fail the check):
       fold-in-image        the model folds back inside its own image:
                            D(r_max) < image corner hypot(aspect, 1)
+                           (a circular fisheye: its image circle, 1)
       xml-error            the file is not well-formed XML (line, column)
       not-a-database, missing-attribute, bad-value, unknown-model,
       no-lens, duplicate-lens, duplicate-focal, unreadable,
