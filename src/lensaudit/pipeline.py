@@ -49,8 +49,8 @@ if TYPE_CHECKING:
     from .summary import Summary
     from .workers import Job
 
-# The column names and float formatting live in lensaudit.columns; they are
-# also found here, where the modules that write columns have long taken them.
+# The column names and float formatting live in lensaudit.columns; other
+# modules also find them here.
 __all__ = [
     "COLUMNS",
     "ENTRY_COLUMNS",
@@ -269,6 +269,7 @@ class Audit:
 
     @cached_property
     def summary(self) -> Summary:
+        """Tables 1 and 2, status counts and the folding entries (see :mod:`lensaudit.summary`)."""
         from .summary import summarize
 
         return summarize(self)
@@ -352,7 +353,7 @@ def _audit_files(
             try:
                 data = loader.read_regular_file(path)
             except OSError:  # parsed below, where reading it fails again and is reported
-                data = None
+                pass
             else:
                 digest = content_digest(data)
                 found = store.find(path, digest, name)
