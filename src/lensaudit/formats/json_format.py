@@ -156,11 +156,14 @@ def document(audit: Audit) -> dict[str, Any]:
 def write(audit: Audit, stream: TextIO) -> None:
     head = json.dumps({**_head(audit), "entries": []}, indent=1, allow_nan=False)
     assert head.endswith(_ENTRIES_END)
-    entries = join(list(audit.rows("json")))
-    if entries:  # as json.dump lays out a list that is not empty
-        head = head[: -len("[]\n}")] + "[\n"
-        stream.write(head)
-        stream.write(entries)
-        stream.write("\n ]\n}\n")
-    else:
+    texts = [text for text in audit.rows("json") if text]
+    if not texts:
         stream.write(head + "\n")
+        return
+    # As json.dump lays out a list that is not empty; each file's text written as is.
+    stream.write(head[: -len("[]\n}")] + "[\n")
+    for number, text in enumerate(texts):
+        if number:
+            stream.write(",\n")
+        stream.write(text)
+    stream.write("\n ]\n}\n")
