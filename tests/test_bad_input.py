@@ -51,7 +51,9 @@ TWO_LENSES = """\
 
 
 def rows(result) -> list[dict[str, str]]:
-    return list(csv.DictReader(io.StringIO(result.output)))
+    # The bytes as written: click's ``output`` turns "\r\n" inside a quoted name into "\n".
+    text = result.stdout_bytes.decode("utf-8")
+    return list(csv.DictReader(io.StringIO(text, newline="")))
 
 
 def scan_csv(*paths) -> list[dict[str, str]]:
