@@ -431,6 +431,8 @@ def test_bundled_database_counts_every_entry_and_has_no_input_errors(bundled_db)
         "fold-in-image",
         "fold-near-image",
         "duplicate-focal",
+        "vignetting-zero-in-image",
+        "vignetting-low-in-image",
     }
 
 

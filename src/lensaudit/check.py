@@ -15,6 +15,13 @@ sentence. Errors make the check fail; warnings and notices do not.
   its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
   ``bad-value`` (not a finite number, focal or crop factor <= 0),
   ``unknown-model``, ``no-lens``, ``r-max-not-computable``.
+- Vignetting and TCA (see :mod:`lensaudit.vignetting` and :mod:`lensaudit.tca`):
+  ``vignetting-zero-in-image`` (error) when the correction's C(r) reaches 0
+  inside the image, ``vignetting-low-in-image`` (warning) when it falls below
+  0.1, ``vignetting-not-monotone`` (notice, only when asked for) when it turns,
+  ``tca-fold-in-image`` (error) when a colour channel folds inside the image;
+  a ``<vignetting>`` or ``<tca>`` element that cannot be audited is one of the
+  input errors above, its message naming the element.
 - Duplicates: ``duplicate-lens`` (maker, model and crop factor of an earlier
   ``<lens>``, names compared ignoring letter case and runs of white space)
   and ``duplicate-focal`` (a second ``<distortion>`` for the same focal
@@ -58,7 +65,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import database, loader
+from . import calibrations, database, loader
 from .loader import LoadError
 from .metrics import is_circular_fisheye
 
@@ -548,6 +555,8 @@ class _File:
     problem_text: str = ""  # the problem without its position, to match baselines
     lens_of_entry: list[int | None] | None = None  # index into ``lenses``, per entry
     lenses: tuple[_Lens, ...] = ()
+    # <vignetting> and <tca> records of a file that parsed, by kind
+    calibrations: dict[str, list] = field(default_factory=dict)
 
 
 _POSITION = re.compile(r",? ?(?:\(<string>, )?line (\d+), column (\d+)\)?\s*$")
@@ -621,7 +630,14 @@ def _read(source: Source) -> _File:
         for element, entry in zip(elements, entries, strict=True)
     ):
         lens_of_entry = [lens_of_element.get(element) for element in elements]
-    return _File(source, entries, lens_of_entry=lens_of_entry, lenses=lenses)
+    vignetting, tca = calibrations.entries_from_tree(root, display)
+    return _File(
+        source,
+        entries,
+        lens_of_entry=lens_of_entry,
+        lenses=lenses,
+        calibrations={calibrations.VIGNETTING: vignetting, calibrations.TCA: tca},
+    )
 
 
 def _untranslated(element, tag: str) -> str | None:
@@ -726,6 +742,8 @@ def _analyse(
         keys = ((*content, _lens_identity(entry.maker, entry.lens)), content)
         add(index, Identified(finding, keys, (read[index].source.file_name,)))
 
+    for index, item in _calibration_findings(read, verbose):
+        add(index, item)
     for index, item in _duplicate_focals(read):
         add(index, item)
     for index, item in _duplicate_lenses(read):
@@ -920,6 +938,101 @@ def _fold_finding(
             f"the model folds back outside its image: {where}",
         )
     return None
+
+
+def _calibration_findings(read: Sequence[_File], verbose: bool) -> Iterable[tuple[int, Identified]]:
+    """Findings of the vignetting and TCA audits in the files that parsed.
+
+    Their identity is content, as for distortion entries: the kind, the
+    entry's own values, then its lens by name.
+    """
+    from . import tca, vignetting
+
+    shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
+    for kind, module in ((calibrations.VIGNETTING, vignetting), (calibrations.TCA, tca)):
+        owners = [
+            index
+            for index, file in enumerate(read)
+            if file.problem is None
+            for _ in file.calibrations.get(kind, ())
+        ]
+        entries = [
+            entry
+            for file in read
+            if file.problem is None
+            for entry in file.calibrations.get(kind, ())
+        ]
+        if not entries:
+            continue
+        with np.errstate(all="ignore"):
+            audit = module.audit_entries(entries)
+        severities = audit.metrics["severity"].tolist()
+        for position, entry in enumerate(entries):
+            if entry.status == loader.STATUS_OK:
+                if severities[position] not in shown:
+                    continue
+            elif entry.status not in calibrations.STATUS_CODES:
+                continue
+            record = _calibration_record(audit, position)
+            for severity, code, _, _, message in module.findings([record]):
+                finding = Finding(
+                    severity,
+                    code,
+                    entry.file,
+                    entry.line,
+                    0,
+                    _clip(message),
+                    _clip_key(
+                        (
+                            entry.maker,
+                            entry.lens,
+                            _number(entry.crop_factor),
+                            entry.model,
+                            _number(entry.focal),
+                        )
+                    ),
+                )
+                content = (severity, code, kind, _calibration_content(entry))
+                keys = ((*content, _lens_identity(entry.maker, entry.lens)), content)
+                index = owners[position]
+                yield index, Identified(finding, keys, (read[index].source.file_name,))
+
+
+def _calibration_record(audit: calibrations.CalibrationAudit, position: int) -> dict:
+    """One entry of a vignetting or TCA audit as the dict its ``records()`` gives."""
+    entry = audit.entries[position]
+    ok = entry.status == loader.STATUS_OK
+    record = {}
+    for name in audit.COLUMNS:
+        if name not in audit.METRIC_COLUMNS:
+            record[name] = getattr(entry, name)
+        elif name in audit.BOOL_COLUMNS:
+            record[name] = bool(audit.metrics[name][position]) if ok else None
+        else:
+            value = audit.metrics[name][position]
+            record[name] = value.item() if hasattr(value, "item") else value
+    return record
+
+
+_CALIBRATION_SKIPPED = frozenset({"file", "line", "maker", "lens"})
+
+
+def _calibration_content(entry: object) -> tuple:
+    """A vignetting or TCA record's own values, without its lens's name, file
+    or line (NaN as None, line numbers left out of the message)."""
+    from dataclasses import fields
+
+    values = []
+    for item in fields(entry):  # type: ignore[arg-type]
+        if item.name in _CALIBRATION_SKIPPED:
+            continue
+        value = getattr(entry, item.name)
+        if item.name == "message":
+            value = _LINE_NUMBER.sub("line", value)
+        elif isinstance(value, float):
+            value = _number(value)
+        values.append(value)
+    return tuple(values)
 
 
 def _duplicate_focals(read: Sequence[_File]) -> Iterable[tuple[int, Identified]]:

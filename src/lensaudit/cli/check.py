@@ -47,7 +47,11 @@ EXIT_FINDINGS = 1
 )
 @output_file
 @click.option(
-    "-v", "--verbose", is_flag=True, help="Also report, as notices, every fold outside the image."
+    "-v",
+    "--verbose",
+    is_flag=True,
+    help="Also report, as notices, every fold outside the image and every "
+    "vignetting model that is not monotone inside it.",
 )
 def check(
     paths: tuple[Path, ...],
@@ -71,12 +75,18 @@ def check(
       xml-error            the file is not well-formed XML (line, column)
       not-a-database, missing-attribute, bad-value, unknown-model,
       no-lens, duplicate-lens, duplicate-focal, unreadable,
-      r-max-not-computable
+      r-max-not-computable (the input errors also for <vignetting>
+      and <tca> elements, which their messages name)
+      vignetting-zero-in-image  C(r) <= 0 inside the image: the
+                           correction divides by zero or flips sign
+      tca-fold-in-image    a colour channel folds inside the image
     Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
+      vignetting-low-in-image (C(r) < 0.1 inside the image);
       duplicate-lens and duplicate-focal when the two are identical.
     Notices: baseline-unreadable (how a baseline file that cannot be parsed
       was replaced).
-    Notices with --verbose: fold-outside-image (any other finite r_max).
+    Notices with --verbose: fold-outside-image (any other finite r_max),
+      vignetting-not-monotone (C(r) turns inside the image).
 
     With --baseline, findings the baseline already has are reported as known
     and do not fail, so only new or changed entries fail the check. Entries
