@@ -574,7 +574,7 @@ def test_the_short_path_gives_the_record_the_full_examination_gives(model, attri
     for key, value in attributes.items():
         element.set(key, value)
     spec = calibrations.SPECS["vignetting"]
-    context = calibrations.loader._lens_context(None)
+    context = calibrations.loader.lens_context(None)
     context.problem = ""  # a lens without problems
     fast = calibrations._entry(spec, element, "x.xml", context)
     full = calibrations._checked_entry(spec, element, "x.xml", context)

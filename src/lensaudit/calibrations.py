@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,7 +42,11 @@ from .loader import (
     STATUS_UNKNOWN_MODEL,
     STATUS_UNREADABLE,
     STATUS_XML_ERROR,
+    LensContext,
     SourceFile,
+    attribute_number,
+    quoted,
+    status_of,
 )
 
 if TYPE_CHECKING:
@@ -56,14 +60,10 @@ KINDS = (VIGNETTING, TCA)
 
 
 @dataclass(slots=True)
-class VignettingEntry:
-    """One ``<vignetting>`` element: C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6.
-
-    r = 1 at half the diagonal of the calibration sensor (see
-    :mod:`lensaudit.vignetting`). ``focal`` in millimetres, ``aperture`` an
-    f-number, ``distance`` in metres, as Lensfun writes them. Coefficients
-    are NaN for entries that were not audited.
-    """
+class CalibrationEntry:
+    """What every ``<vignetting>`` and ``<tca>`` record starts with: where it is,
+    its lens (with the overrides of ``<calibration>`` applied), its model and
+    focal length in millimetres."""
 
     file: str
     line: int
@@ -74,6 +74,18 @@ class VignettingEntry:
     aspect_ratio: float
     model: str
     focal: float
+
+
+@dataclass(slots=True)
+class VignettingEntry(CalibrationEntry):
+    """One ``<vignetting>`` element: C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6.
+
+    r = 1 at half the diagonal of the calibration sensor (see
+    :mod:`lensaudit.vignetting`). ``focal`` in millimetres, ``aperture`` an
+    f-number, ``distance`` in metres, as Lensfun writes them. Coefficients
+    are NaN for entries that were not audited.
+    """
+
     aperture: float = NAN
     distance: float = NAN
     k1: float = NAN
@@ -84,7 +96,7 @@ class VignettingEntry:
 
 
 @dataclass(slots=True)
-class TCAEntry:
+class TCAEntry(CalibrationEntry):
     """One ``<tca>`` element: per channel (red, blue), r_d = r (b r^2 + c r + v).
 
     ``poly3`` fills ``vr vb cr cb br bb``; ``linear`` fills ``kr kb``
@@ -92,15 +104,6 @@ class TCAEntry:
     units, 1 = half the short side (see :mod:`lensaudit.tca`).
     """
 
-    file: str
-    line: int
-    maker: str
-    lens: str
-    type: str
-    crop_factor: float
-    aspect_ratio: float
-    model: str
-    focal: float
     kr: float = NAN
     kb: float = NAN
     vr: float = NAN
@@ -148,15 +151,6 @@ SPECS = {
 }
 #: Model names each kind can audit.
 MODELS = {kind: tuple(spec.models) for kind, spec in SPECS.items()}
-
-# When an entry has several problems, the status names the most basic one
-# (the distortion loader's order).
-_STATUS_PRIORITY = (
-    STATUS_NO_LENS,
-    STATUS_MISSING_ATTRIBUTE,
-    STATUS_UNKNOWN_MODEL,
-    STATUS_BAD_VALUE,
-)
 _POSITIVE = ("focal", "aperture", "distance")
 
 
@@ -173,7 +167,16 @@ class CalibrationLoad:
         return self.vignetting if kind == VIGNETTING else self.tca
 
 
-def _record(spec: _Spec, name: str, line: int, context: Any, model: str, values: dict) -> Any:
+def _record(
+    spec: _Spec,
+    name: str,
+    line: int,
+    context: LensContext,
+    model: str,
+    focal: float,
+    values: Iterable[float],
+) -> Any:
+    """A record of ``context``'s lens; ``values`` are those of ``spec.fields``."""
     return spec.entry(
         name,
         line,
@@ -183,8 +186,8 @@ def _record(spec: _Spec, name: str, line: int, context: Any, model: str, values:
         context.crop_factor,
         context.aspect_ratio,
         model,
-        values.get("focal", NAN),
-        *(values.get(f, NAN) for f in spec.fields),
+        focal,
+        *values,
     )
 
 
@@ -200,7 +203,7 @@ _FAST = {
 }
 
 
-def _entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any:
+def _entry(spec: _Spec, element: etree._Element, name: str, context: LensContext) -> Any:
     """The record of one element; the common case (plain numbers) takes a short path.
 
     Anything else is examined in full by :func:`_checked_entry`.
@@ -224,22 +227,19 @@ def _entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any
                 total = sum(numbers)
                 if total - total == 0 and min(numbers[: len(spec.required)]) > 0:  # all finite
                     layout = _FAST[spec.tag, model][1]  # type: ignore[index]
-                    return spec.entry(
+                    return _record(
+                        spec,
                         name,
                         element.sourceline or 0,
-                        context.maker,
-                        context.lens,
-                        context.type,
-                        context.crop_factor,
-                        context.aspect_ratio,
-                        model,
+                        context,
+                        model,  # type: ignore[arg-type]
                         numbers[0],
-                        *[NAN if i is None else numbers[i] for i in layout],
+                        [NAN if i is None else numbers[i] for i in layout],
                     )
     return _checked_entry(spec, element, name, context)
 
 
-def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: Any) -> Any:
+def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: LensContext) -> Any:
     """The record of one element, every problem noted."""
     attributes = element.attrib
     problems: list[tuple[str, str]] = []
@@ -248,7 +248,7 @@ def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: Any
         problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
     values: dict[str, float] = {}
     for attribute in spec.required:
-        values[attribute] = _number(attributes, attribute, None, problems)
+        values[attribute] = attribute_number(attributes, attribute, None, problems)
     for attribute in _POSITIVE:
         value = values.get(attribute, NAN)
         if value <= 0:
@@ -256,64 +256,33 @@ def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: Any
     defaults = spec.models.get(model)
     if defaults is not None:
         for attribute, default in defaults.items():
-            values[attribute] = _number(attributes, attribute, default, problems)
+            values[attribute] = attribute_number(attributes, attribute, default, problems)
     elif model:
         known = ", ".join(spec.models)
-        problems.append(
-            (
-                STATUS_UNKNOWN_MODEL,
-                f"model {loader._quoted(model)} is not one of {known}",
-            )
-        )
+        problems.append((STATUS_UNKNOWN_MODEL, f"model {quoted(model)} is not one of {known}"))
     if context.problem:
         problems.append((context.status, context.problem))
-    record = _record(spec, name, element.sourceline or 0, context, model, values)
-    if problems:
-        record.status = min((code for code, _ in problems), key=_STATUS_PRIORITY.index)
-        record.message = "; ".join(text for _, text in problems)
+    record = _record(
+        spec,
+        name,
+        element.sourceline or 0,
+        context,
+        model,
+        values.get("focal", NAN),
+        [values.get(f, NAN) for f in spec.fields],
+    )
+    record.status, record.message = status_of(problems)
     return record
-
-
-def _number(
-    attributes: Any, attribute: str, default: float | None, problems: list[tuple[str, str]]
-) -> float:
-    """Attribute value as a number; a problem is noted for a bad or missing one."""
-    text = attributes.get(attribute)
-    if text is None:
-        if default is None:
-            problems.append((STATUS_MISSING_ATTRIBUTE, f"missing {attribute}="))
-            return NAN
-        return default
-    try:
-        return loader.parse_number(text)
-    except ValueError as error:
-        problems.append((STATUS_BAD_VALUE, f"{attribute}={error}"))
-        return NAN
 
 
 def entries_from_tree(root: etree._Element, name: str) -> tuple[list[Any], list[Any]]:
     """(vignetting, tca) records for the elements under ``root``, in document order."""
     found: dict[str, list[Any]] = {VIGNETTING: [], TCA: []}
     specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
-    lens = calibration = None
-    lens_context = context = loader._lens_context(None)
-    for element in root.iter("lens", "calibration", "vignetting", "tca"):
-        tag = element.tag
-        if tag == "lens":
-            lens, calibration = element, None
-            lens_context = loader._lens_context(lens)
-        elif tag == "calibration":
-            if element.getparent() is lens:
-                calibration = element
-                context = loader._calibration_context(calibration, lens_context)
-        else:
-            spec, out = specs[tag]
-            parent = element.getparent()
-            if parent is not calibration or lens is None or parent.getparent() is not lens:
-                # Outside <lens><calibration>: the context the distortion loader gives.
-                out.append(_entry(spec, element, name, loader._context_of(element)))
-            else:
-                out.append(_entry(spec, element, name, context))
+    # The lens context is the one the distortion loader gives a <distortion>.
+    for element, context in loader.elements_in_context(root, tuple(specs)):
+        spec, out = specs[element.tag]
+        out.append(_entry(spec, element, name, context))
     return found[VIGNETTING], found[TCA]
 
 
@@ -321,14 +290,6 @@ def _error_record(spec: _Spec, name: str, line: int, status: str, message: str) 
     record = spec.entry(name, line, "", "", "", NAN, NAN, "", NAN)
     record.status, record.message = status, message
     return record
-
-
-def _marked(records: Iterable[Any], status: str, message: str) -> list[Any]:
-    """Records given a file-level status; their own problems are kept in front."""
-    return [
-        replace(r, status=status, message=f"{r.message}; {message}" if r.message else message)
-        for r in records
-    ]
 
 
 def read_bytes(data: bytes, name: str) -> tuple[list[VignettingEntry], list[TCAEntry], str]:
@@ -340,54 +301,15 @@ def read_bytes(data: bytes, name: str) -> tuple[list[VignettingEntry], list[TCAE
     ``<lensdatabase>`` gives a ``not_database`` record, then its elements,
     each so marked.
     """
-    from lxml import etree
-
-    try:
-        root = etree.fromstring(data, loader.make_parser())
-    except etree.XMLSyntaxError as error:
-        line, column, text = loader._syntax_error_position(error)
-        reason = f"line {line}, column {column}: {text}"
-        message = f"XML is not well-formed at {reason}"
-        salvaged = _salvage(data, name)
-        salvage_message = f"file is not well-formed XML ({reason}); entry read in recovery mode"
-        out = []
-        for kind, records in zip(KINDS, salvaged, strict=True):
-            head = _error_record(SPECS[kind], name, line, STATUS_XML_ERROR, message)
-            out.append([head, *_marked(records, STATUS_XML_ERROR, salvage_message)])
-        return out[0], out[1], message
-    if b"xmlns" in data:
-        loader._use_local_names(root)
-    if root.tag != loader.DATABASE_ROOT:
-        tag = root.tag if isinstance(root.tag, str) else "?"
-        if len(tag) > 40:
-            tag = tag[:40] + "..."
-        message = (
-            f"root element is <{tag}>, not <{loader.DATABASE_ROOT}>: not a Lensfun database file"
-        )
-        line = root.sourceline or 1
-        out = []
-        for kind, records in zip(KINDS, entries_from_tree(root, name), strict=True):
-            head = _error_record(SPECS[kind], name, line, STATUS_NOT_DATABASE, message)
-            out.append([head, *_marked(records, STATUS_NOT_DATABASE, message)])
-        return out[0], out[1], message
-    vignetting, tca = entries_from_tree(root, name)
-    return vignetting, tca, ""
-
-
-def _salvage(data: bytes, name: str) -> tuple[list[Any], list[Any]]:
-    """Records libxml2's recovery mode can still read from a broken file."""
-    from lxml import etree
-
-    parser = etree.XMLParser(
-        recover=True, resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
-    )
-    try:
-        root = etree.fromstring(data, parser)
-    except etree.XMLSyntaxError:
-        return [], []
-    if root is None:
-        return [], []
-    return entries_from_tree(root, name)
+    parsed = loader.parse_file(data)
+    found = ([], []) if parsed.root is None else entries_from_tree(parsed.root, name)
+    if not parsed.error:
+        return found[0], found[1], ""
+    out = []
+    for kind, records in zip(KINDS, found, strict=True):
+        head = _error_record(SPECS[kind], name, parsed.line, parsed.status, parsed.error)
+        out.append([head, *loader.marked(records, parsed.status, parsed.entry_message)])
+    return out[0], out[1], parsed.error
 
 
 def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
@@ -401,7 +323,7 @@ def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
         try:
             vignetting, tca, error = read_bytes(loader.read_file(path), name)
         except OSError as os_error:
-            error = f"cannot read file: {os_error.strerror or os_error}"
+            error = loader.unreadable_file(name, os_error)[1]
             vignetting = [_error_record(SPECS[VIGNETTING], name, 0, STATUS_UNREADABLE, error)]
             tca = [_error_record(SPECS[TCA], name, 0, STATUS_UNREADABLE, error)]
         result.vignetting.extend(vignetting)

@@ -134,13 +134,13 @@ def parse_number(text: str | None) -> float:
     if value is not None and value - value == 0 and text.isascii() and "_" not in text:
         return value
     if _DECIMAL.match(text):
-        raise ValueError(f"{_quoted(text)} overflows a double")
+        raise ValueError(f"{quoted(text)} overflows a double")
     if _NON_FINITE.match(text):
-        raise ValueError(f"{_quoted(text)} is not a finite number")
-    raise ValueError(f"{_quoted(text)} is not a number")
+        raise ValueError(f"{quoted(text)} is not a finite number")
+    raise ValueError(f"{quoted(text)} is not a number")
 
 
-def _quoted(text: str, limit: int = 40) -> str:
+def quoted(text: str, limit: int = 40) -> str:
     """A value for a message: stripped, quoted, and cut short if long."""
     text = text.strip()
     if len(text) > limit:
@@ -154,7 +154,7 @@ def parse_aspect_ratio(text: str) -> float:
     if sep:
         divisor = parse_number(denominator)
         if divisor == 0:
-            raise ValueError(f"{_quoted(text)} divides by zero")
+            raise ValueError(f"{quoted(text)} divides by zero")
         value = parse_number(numerator) / divisor
     else:
         value = parse_number(text)
@@ -185,7 +185,13 @@ def _text(element: etree._Element) -> str:
 
 
 @dataclass(slots=True)
-class _LensContext:
+class LensContext:
+    """What a lens, and the ``<calibration>`` an entry is in, give each of its entries.
+
+    ``problem`` is why entries of the lens cannot be audited ("" if they can),
+    ``status`` the status it gives them.
+    """
+
     maker: str
     lens: str
     mounts: tuple[str, ...]
@@ -224,12 +230,7 @@ class _LensContext:
         return DistortionEntry(
             name,
             line,
-            self.maker,
-            self.lens,
-            self.mounts,
-            self.type,
-            self.crop_factor,
-            self.aspect_ratio,
+            *self.lens_fields,
             model,
             focal,
             real_focal,
@@ -243,9 +244,11 @@ class _LensContext:
 _LENS_CHILDREN = ("maker", "model", "mount", "type", "cropfactor", "aspect-ratio")
 
 
-def _lens_context(lens: etree._Element | None) -> _LensContext:
+def lens_context(lens: etree._Element | None) -> LensContext:
+    """The context a ``<lens>`` gives its entries; for None (an entry outside
+    any lens), one whose ``problem`` says so, status ``no_lens``."""
     if lens is None:
-        return _LensContext(
+        return LensContext(
             "",
             "",
             (),
@@ -288,7 +291,7 @@ def _lens_context(lens: etree._Element | None) -> _LensContext:
         except ValueError as error:
             problems.append(f"<aspect-ratio> {error}")
             aspect_ratio = NAN
-    return _LensContext(
+    return LensContext(
         maker, model, mounts, lens_type, crop_factor, aspect_ratio, "; ".join(problems)
     )
 
@@ -299,7 +302,7 @@ def _positive(value: float, what: str) -> float:
     return value
 
 
-def _calibration_context(calibration: etree._Element | None, lens: _LensContext) -> _LensContext:
+def calibration_context(calibration: etree._Element | None, lens: LensContext) -> LensContext:
     """Apply what ``<calibration>`` adds to the lens: ``cropfactor=`` and
     ``aspect-ratio=`` attributes, and ``<real-focal-length>`` elements (the
     form version 1 databases give the real focal length in)."""
@@ -333,7 +336,7 @@ def _calibration_context(calibration: etree._Element | None, lens: _LensContext)
             aspect_ratio = parse_aspect_ratio(aspect_text)
         except ValueError as error:
             problems.append(f"<calibration aspect-ratio> {error}")
-    return _LensContext(
+    return LensContext(
         lens.maker,
         lens.lens,
         lens.mounts,
@@ -346,8 +349,8 @@ def _calibration_context(calibration: etree._Element | None, lens: _LensContext)
     )
 
 
-# When an entry has several problems, the status names the most basic one.
-_STATUS_PRIORITY = (
+#: When an entry has several problems, its status names the most basic one.
+STATUS_PRIORITY = (
     STATUS_NO_LENS,
     STATUS_MISSING_ATTRIBUTE,
     STATUS_UNKNOWN_MODEL,
@@ -355,10 +358,12 @@ _STATUS_PRIORITY = (
 )
 
 
-def _number(
-    attributes, attribute: str, default: float | None, problems: list[tuple[str, str]]
+def attribute_number(
+    attributes: Any, attribute: str, default: float | None, problems: list[tuple[str, str]]
 ) -> float:
-    """Attribute value as a number; a problem is noted for a bad or missing one."""
+    """An attribute's value as a number (``default`` if it is missing); a bad one,
+    or a missing one without a default, appends (status, message) to
+    ``problems`` and gives NaN."""
     text = attributes.get(attribute)
     if text is None:
         if default is None:
@@ -384,7 +389,7 @@ _LAYOUT = {
 }
 
 
-def _entry(element: etree._Element, name: str, context: _LensContext) -> DistortionEntry:
+def _entry(element: etree._Element, name: str, context: LensContext) -> DistortionEntry:
     """Build the record of one ``<distortion>`` element.
 
     The common case, a known model with plain numbers, takes a short path;
@@ -426,15 +431,17 @@ def _entry(element: etree._Element, name: str, context: _LensContext) -> Distort
     return _checked_entry(element, name, context)
 
 
-def _checked_entry(element: etree._Element, name: str, context: _LensContext) -> DistortionEntry:
+def _checked_entry(element: etree._Element, name: str, context: LensContext) -> DistortionEntry:
     """The record of one ``<distortion>`` element, every problem noted."""
     attributes = element.attrib
     problems: list[tuple[str, str]] = []
     model = (attributes.get("model") or "").strip()
     if not model:
         problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
-    focal = _number(attributes, "focal", None, problems)
-    real_focal = _number(attributes, "real-focal", context.real_focals.get(focal, NAN), problems)
+    focal = attribute_number(attributes, "focal", None, problems)
+    real_focal = attribute_number(
+        attributes, "real-focal", context.real_focals.get(focal, NAN), problems
+    )
     for attribute, value in (("focal", focal), ("real-focal", real_focal)):
         if value <= 0:
             problems.append((STATUS_BAD_VALUE, f"{attribute}={value:g} is not positive"))
@@ -442,72 +449,135 @@ def _checked_entry(element: etree._Element, name: str, context: _LensContext) ->
     names = MODEL_COEFFICIENTS.get(model)
     if names is not None:
         coefficients = {
-            attribute: _number(attributes, attribute, 0.0, problems) for attribute in names
+            attribute: attribute_number(attributes, attribute, 0.0, problems) for attribute in names
         }
     elif model:
         problems.append(
-            (STATUS_UNKNOWN_MODEL, f"model {_quoted(model)} is not one of ptlens, poly3, poly5")
+            (STATUS_UNKNOWN_MODEL, f"model {quoted(model)} is not one of ptlens, poly3, poly5")
         )
     if context.problem:
         problems.append((context.status, context.problem))
-    status, message = STATUS_OK, ""
-    if problems:
-        status = min((code for code, _ in problems), key=_STATUS_PRIORITY.index)
-        message = "; ".join(text for _, text in problems)
+    status, message = status_of(problems)
     layout = [coefficients.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")]
     return context.record(
         name, element.sourceline or 0, model, focal, real_focal, layout, status, message
     )
 
 
+def status_of(problems: list[tuple[str, str]]) -> tuple[str, str]:
+    """(status, message) of an entry with these (status, message) problems:
+    the most basic status (see :data:`STATUS_PRIORITY`) and every message."""
+    if not problems:
+        return STATUS_OK, ""
+    status = min((code for code, _ in problems), key=STATUS_PRIORITY.index)
+    return status, "; ".join(text for _, text in problems)
+
+
 def entries_from_tree(root: etree._Element, name: str) -> Iterator[DistortionEntry]:
     """Records for every ``<distortion>`` element under ``root``, in document order."""
+    for element, context in elements_in_context(root, ("distortion",)):
+        yield _entry(element, name, context)
+
+
+def elements_in_context(
+    root: etree._Element, tags: tuple[str, ...]
+) -> Iterator[tuple[etree._Element, LensContext]]:
+    """Each element under ``root`` named one of ``tags``, in document order, with
+    the context it is read in: its lens's, with its ``<calibration>`` applied."""
     lens = calibration = None
-    lens_context = context = _lens_context(None)
-    for element in root.iter("lens", "calibration", "distortion"):
+    of_lens = context = lens_context(None)
+    for element in root.iter("lens", "calibration", *tags):
         tag = element.tag
-        if tag == "distortion":
-            # calibration is only ever set to a child of the current lens.
-            if calibration is None or lens is None or element.getparent() is not calibration:
-                yield _entry(element, name, _context_of(element))
-            else:
-                yield _entry(element, name, context)
-        elif tag == "lens":
+        if tag == "lens":
             lens, calibration = element, None
-            lens_context = _lens_context(lens)
-        elif element.getparent() is lens:
-            calibration = element
-            context = _calibration_context(calibration, lens_context)
+            of_lens = lens_context(lens)
+        elif tag == "calibration":
+            if element.getparent() is lens:
+                calibration = element
+                context = calibration_context(calibration, of_lens)
+        # calibration is only ever set to a child of the current lens.
+        elif calibration is None or lens is None or element.getparent() is not calibration:
+            yield element, context_of(element)
+        else:
+            yield element, context
 
 
-def _context_of(element: etree._Element) -> _LensContext:
-    """The context of a ``<distortion>`` found outside lens/calibration (rare)."""
+def context_of(element: etree._Element) -> LensContext:
+    """The context of an element found outside ``<lens><calibration>`` (rare):
+    that of the lens it is in, if any, with its parent's overrides if the
+    parent is a ``<calibration>``."""
     parent = element.getparent()
     lens = next(element.iterancestors("lens"), None)
-    base = _lens_context(lens)
-    return _calibration_context(parent, base) if parent is not None else base
+    base = lens_context(lens)
+    return calibration_context(parent, base) if parent is not None else base
 
 
-def _salvage(data: bytes, name: str, reason: str) -> list[DistortionEntry]:
-    """Entries libxml2 can still recover from a broken file, marked as such."""
+@dataclass(frozen=True, slots=True)
+class ParsedFile:
+    """A database file's XML tree, and what is wrong with the file as a whole.
+
+    ``status`` is ``ok``, ``xml_error`` (not well-formed: ``root`` is then
+    what libxml2's recovery mode can still read, or None) or
+    ``not_database`` (the root is not ``<lensdatabase>``). ``error`` is the
+    file's error message ("" if none), ``line`` where it is, and
+    ``entry_message`` what each entry read from ``root`` is marked with.
+    """
+
+    root: etree._Element | None
+    status: str = STATUS_OK
+    line: int = 0
+    error: str = ""
+    entry_message: str = ""
+
+
+def parse_file(data: bytes) -> ParsedFile:
+    """Parse one file's content safely (see :func:`make_parser`), as liblensfun
+    reads it: without namespaces."""
+    from lxml import etree  # imported here: a fully cached load never needs it
+
+    try:
+        root = etree.fromstring(data, make_parser())
+    except etree.XMLSyntaxError as error:
+        line, column, text = syntax_error_position(error)
+        reason = f"line {line}, column {column}: {text}"
+        return ParsedFile(
+            _recovered_tree(data),
+            STATUS_XML_ERROR,
+            line,
+            f"XML is not well-formed at {reason}",
+            f"file is not well-formed XML ({reason}); entry read in recovery mode",
+        )
+    if b"xmlns" in data:
+        use_local_names(root)
+    if root.tag != DATABASE_ROOT:
+        tag = root.tag if isinstance(root.tag, str) else "?"
+        message = (
+            f"root element is <{_clip(tag)}>, not <{DATABASE_ROOT}>: not a Lensfun database file"
+        )
+        return ParsedFile(root, STATUS_NOT_DATABASE, root.sourceline or 1, message, message)
+    return ParsedFile(root)
+
+
+def _recovered_tree(data: bytes) -> etree._Element | None:
+    """What libxml2's recovery mode can still read of a broken file, or None."""
     from lxml import etree
 
     parser = etree.XMLParser(
         recover=True, resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
     )
     try:
-        root = etree.fromstring(data, parser)
+        return etree.fromstring(data, parser)
     except etree.XMLSyntaxError:
-        return []
-    if root is None:
-        return []
-    salvaged = []
-    for entry in entries_from_tree(root, name):
-        message = f"file is not well-formed XML ({reason}); entry read in recovery mode"
-        if entry.message:
-            message = f"{entry.message}; {message}"
-        salvaged.append(_replace_status(entry, STATUS_XML_ERROR, message))
-    return salvaged
+        return None
+
+
+def marked(records: Iterable[Any], status: str, message: str) -> list[Any]:
+    """Records (dataclasses with ``status`` and ``message``) given a file-level
+    status; their own problems are kept in front of ``message``."""
+    return [
+        replace(r, status=status, message=f"{r.message}; {message}" if r.message else message)
+        for r in records
+    ]
 
 
 def _replace_status(entry: DistortionEntry, status: str, message: str) -> DistortionEntry:
@@ -545,21 +615,23 @@ def read_bytes(data: bytes, name: str) -> tuple[list[DistortionEntry], str]:
     A file that is not well-formed XML yields one ``xml_error`` record at the
     error's line (with libxml2's message and column), followed by any entries
     libxml2's recovery mode can still read, each also marked ``xml_error``.
+    A well-formed file whose root is not ``<lensdatabase>`` yields one
+    ``not_database`` record, then one for each ``<distortion>`` in it, so
+    that none is lost; none of them is audited.
     """
-    from lxml import etree  # imported here: a fully cached load never needs it
+    parsed = parse_file(data)
+    entries = [] if parsed.root is None else list(entries_from_tree(parsed.root, name))
+    if not parsed.error:
+        return entries, ""
+    head = _error_entry(name, parsed.line, parsed.status, parsed.error)
+    if parsed.status == STATUS_XML_ERROR:
+        entries = marked(entries, parsed.status, parsed.entry_message)
+    else:
+        entries = [_replace_status(e, parsed.status, parsed.entry_message) for e in entries]
+    return [head, *entries], parsed.error
 
-    try:
-        root = etree.fromstring(data, make_parser())
-    except etree.XMLSyntaxError as error:
-        return _unparsable(data, name, error)
-    if b"xmlns" in data:
-        _use_local_names(root)
-    if root.tag != DATABASE_ROOT:
-        return _not_a_database(root, name)
-    return list(entries_from_tree(root, name)), ""
 
-
-def _use_local_names(root: etree._Element) -> None:
+def use_local_names(root: etree._Element) -> None:
     """Drop namespaces from element names, in place.
 
     liblensfun's parser does not know namespaces: to it, an element in a
@@ -571,38 +643,11 @@ def _use_local_names(root: etree._Element) -> None:
             element.tag = tag.partition("}")[2]
 
 
-def _not_a_database(root: etree._Element, name: str) -> tuple[list[DistortionEntry], str]:
-    """The records of a well-formed file whose root is not ``<lensdatabase>``.
-
-    One record for the file, then one for each ``<distortion>`` in it, so
-    that none is lost; none of them is audited.
-    """
-    tag = root.tag if isinstance(root.tag, str) else "?"
-    message = f"root element is <{_clip(tag)}>, not <{DATABASE_ROOT}>: not a Lensfun database file"
-    head = _error_entry(name, root.sourceline or 1, STATUS_NOT_DATABASE, message)
-    inside = [
-        _replace_status(entry, STATUS_NOT_DATABASE, message)
-        for entry in entries_from_tree(root, name)
-    ]
-    return [head, *inside], message
-
-
 def _clip(text: str, limit: int = 40) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
-def _unparsable(
-    data: bytes, name: str, error: etree.XMLSyntaxError
-) -> tuple[list[DistortionEntry], str]:
-    """The records of a file that is not well-formed: its error, then what is salvaged."""
-    line, column, text = _syntax_error_position(error)
-    reason = f"line {line}, column {column}: {text}"
-    message = f"XML is not well-formed at {reason}"
-    head = _error_entry(name, line, STATUS_XML_ERROR, message)
-    return [head, *_salvage(data, name, reason)], message
-
-
-def _syntax_error_position(error: etree.XMLSyntaxError) -> tuple[int, int, str]:
+def syntax_error_position(error: etree.XMLSyntaxError) -> tuple[int, int, str]:
     """(line, column, message) of a libxml2 error, columns counted from 1."""
     message = getattr(error, "msg", None) or str(error)
     # libxml2 ends its message with the position; lxml's offset is one less.
@@ -807,3 +852,7 @@ def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = N
         result.files.append(SourceFile(name, path, len(entries), error))
         result.entries.extend(entries)
     return result
+
+
+# Old private names, still used by check.py
+_use_local_names = use_local_names
