@@ -7,39 +7,24 @@ another for it.
 
 from __future__ import annotations
 
-#: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
-COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "real_focal",
-    "a",
-    "b",
-    "c",
-    "k1",
-    "k2",
-    "r_max",
-    "d_max",
-    "tail",
-    "r_corner",
-    "r_normalized",
-    "r_corner_paper",
-    "r_normalized_paper",
-    "folds_in_image",
-    "status",
-    "message",
-)
+#: The columns every audit (distortion, vignetting, TCA) starts with: where the
+#: entry is, its lens, its model and focal length.
+LENS_COLUMNS = (
+    "file", "line", "maker", "lens", "type", "crop_factor", "aspect_ratio", "model", "focal",
+)  # fmt: skip
+#: Those of them that hold numbers.
+LENS_FLOAT_COLUMNS = frozenset({"crop_factor", "aspect_ratio", "focal"})
+#: The columns every audit ends with.
+STATUS_COLUMNS = ("status", "message")
 
 #: Columns computed by the audit; the others are read from the database.
 METRIC_COLUMNS = (
     "r_max", "d_max", "tail", "r_corner", "r_normalized", "r_corner_paper",
     "r_normalized_paper", "folds_in_image",
+)  # fmt: skip
+#: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
+COLUMNS = (
+    *LENS_COLUMNS, "real_focal", "a", "b", "c", "k1", "k2", *METRIC_COLUMNS, *STATUS_COLUMNS,
 )  # fmt: skip
 ENTRY_COLUMNS = tuple(name for name in COLUMNS if name not in METRIC_COLUMNS)
 #: Columns holding numbers (written as shortest round-trip floats, inf, or empty).

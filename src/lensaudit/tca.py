@@ -38,6 +38,7 @@ from .calibrations import (
     sign_change_before,
     status_findings,
 )
+from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
 from .loader import STATUS_OK
 
 FloatArray = NDArray[np.float64]
@@ -46,38 +47,12 @@ FOLD_IN_IMAGE = "tca-fold-in-image"
 
 CHANNELS = ("red", "blue")
 
-COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "kr",
-    "kb",
-    "vr",
-    "vb",
-    "cr",
-    "cb",
-    "br",
-    "bb",
-    "r_corner",
-    "r_fold_red",
-    "r_fold_blue",
-    "folds_in_image",
-    "severity",
-    "status",
-    "message",
-)
+#: The coefficient columns, in the order of :class:`~lensaudit.calibrations.TCAEntry`.
+COEFFICIENTS = ("kr", "kb", "vr", "vb", "cr", "cb", "br", "bb")
 METRIC_COLUMNS = ("r_corner", "r_fold_red", "r_fold_blue", "folds_in_image", "severity")
+COLUMNS = (*LENS_COLUMNS, *COEFFICIENTS, *METRIC_COLUMNS, *STATUS_COLUMNS)
 BOOL_COLUMNS = frozenset({"folds_in_image"})
-FLOAT_COLUMNS = frozenset(
-    {"crop_factor", "aspect_ratio", "focal", "kr", "kb", "vr", "vb", "cr", "cb", "br", "bb"}
-    | {"r_corner", "r_fold_red", "r_fold_blue"}
-)
+FLOAT_COLUMNS = LENS_FLOAT_COLUMNS | set(COEFFICIENTS) | {"r_corner", "r_fold_red", "r_fold_blue"}
 
 #: What each column means, for --help and docs/vignetting.md.
 COLUMN_HELP = {
@@ -274,7 +249,7 @@ def audit_entries(
         radius = image_radius(floats("aspect_ratio"), circular)
     computed = compute(
         [entries[i].model for i in rows],
-        *(floats(n) for n in ("kr", "kb", "vr", "vb", "cr", "cb", "br", "bb")),
+        *map(floats, COEFFICIENTS),
         radius,
     )
     metrics: dict[str, NDArray[Any]] = {}

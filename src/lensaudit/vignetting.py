@@ -62,6 +62,7 @@ from .calibrations import (
     to_float,
     turning_points,
 )
+from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
 from .loader import STATUS_OK
 
 FloatArray = NDArray[np.float64]
@@ -77,47 +78,17 @@ NOT_MONOTONE = "vignetting-not-monotone"
 #: How many entries the terminal summary lists by name.
 WORST_SHOWN = 15
 
-COLUMNS = (
-    "file",
-    "line",
-    "maker",
-    "lens",
-    "type",
-    "crop_factor",
-    "aspect_ratio",
-    "model",
-    "focal",
-    "aperture",
-    "distance",
-    "k1",
-    "k2",
-    "k3",
-    "r_corner",
-    "r_zero",
-    "c_min",
-    "r_min",
-    "r_turn",
-    "zero_in_image",
-    "low_in_image",
-    "monotone",
-    "severity",
-    "status",
-    "message",
-)
 METRIC_COLUMNS = (
-    "r_corner",
-    "r_zero",
-    "c_min",
-    "r_min",
-    "r_turn",
-    "zero_in_image",
-    "low_in_image",
-    "monotone",
-    "severity",
-)
+    "r_corner", "r_zero", "c_min", "r_min", "r_turn", "zero_in_image", "low_in_image",
+    "monotone", "severity",
+)  # fmt: skip
+COLUMNS = (
+    *LENS_COLUMNS, "aperture", "distance", "k1", "k2", "k3", *METRIC_COLUMNS, *STATUS_COLUMNS,
+)  # fmt: skip
 BOOL_COLUMNS = frozenset({"zero_in_image", "low_in_image", "monotone"})
-FLOAT_COLUMNS = frozenset(
-    {"crop_factor", "aspect_ratio", "focal", "aperture", "distance", "k1", "k2", "k3"}
+FLOAT_COLUMNS = (
+    LENS_FLOAT_COLUMNS
+    | {"aperture", "distance", "k1", "k2", "k3"}
     | {"r_corner", "r_zero", "c_min", "r_min", "r_turn"}
 )
 
