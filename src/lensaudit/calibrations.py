@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -605,6 +605,57 @@ class CalibrationAudit:
         self.metrics = metrics
         self._audited = [e.status == STATUS_OK for e in entries]
 
+    @classmethod
+    def of_entries(
+        cls,
+        entries: Sequence[Any],
+        source: Any = None,
+        files: list[SourceFile] | None = None,
+    ) -> Any:
+        """The audit of loaded records: :meth:`compute_audited` on those with
+        status ``ok``; the others' metrics are empty (NaN, False or "")."""
+        import numpy as np
+
+        from . import database
+        from .metrics import is_circular_fisheye
+
+        size = len(entries)
+        ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
+        rows = np.flatnonzero(ok)
+        audited = [entries[i] for i in rows]
+
+        def floats(name: str) -> NDArray[np.float64]:
+            return np.fromiter((getattr(e, name) for e in audited), np.float64, rows.size)
+
+        circular = [is_circular_fisheye(e.lens, e.type) for e in audited]
+        metrics: dict[str, Any] = {}
+        for name, values in cls.compute_audited(audited, floats, circular).items():
+            if name in cls.BOOL_COLUMNS:
+                full = np.zeros(size, dtype=bool)
+            elif name == "severity":
+                full = np.full(size, "", dtype=object)
+            else:
+                full = np.full(size, np.nan)
+            full[rows] = values
+            metrics[name] = full
+        if source is None:
+            source = database.DatabaseSource((), "entries given in memory")
+        return cls(source, files or [], list(entries), metrics)
+
+    @classmethod
+    def from_load(cls, loaded: CalibrationLoad, source: Any = None) -> Any:
+        """The audit of the records of this kind in ``loaded``."""
+        return cls.of_entries(loaded.entries(cls.kind), source, loaded.files)
+
+    @staticmethod
+    def compute_audited(
+        entries: list[Any], floats: Callable[[str], NDArray[np.float64]], circular: list[bool]
+    ) -> dict[str, Any]:
+        """The metric columns (numpy arrays) of audited records; ``floats(name)``
+        gives a field of every record as an array, ``circular`` says which
+        are circular fisheyes."""
+        raise NotImplementedError
+
     def __len__(self) -> int:
         return len(self.entries)
 
@@ -672,6 +723,18 @@ class CalibrationAudit:
     def lines(self) -> list[str]:
         """The terminal summary as lines of text."""
         raise NotImplementedError
+
+    def head_lines(self, summary: dict[str, Any], entries: str) -> list[str]:
+        """The first two lines of the terminal summary: the database, and the
+        counts of files and of ``entries`` (say, "TCA entries") read and audited."""
+        from . import __version__
+
+        files = summary["files"]
+        return [
+            f"lensaudit {__version__}: {self.source.label}",
+            f"{files} file{'s' if files != 1 else ''}, "
+            f"{summary['entries']} {entries}, {summary['audited']} audited",
+        ]
 
     def problem_lines(self, shown: int = 10) -> list[str]:
         """The entries that were not audited: the first ``shown``, then a count."""

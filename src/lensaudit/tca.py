@@ -21,7 +21,7 @@ exactly on the coefficients as written
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -146,6 +146,17 @@ class TCAAudit(CalibrationAudit):
     FLOAT_COLUMNS = FLOAT_COLUMNS
     BOOL_COLUMNS = BOOL_COLUMNS
 
+    @staticmethod
+    def compute_audited(
+        entries: list[Any], floats: Callable[[str], FloatArray], circular: list[bool]
+    ) -> dict[str, NDArray[Any]]:
+        """:func:`compute` of audited records, each judged over its image."""
+        from .metrics import image_radius
+
+        with np.errstate(all="ignore"):
+            radius = image_radius(floats("aspect_ratio"), circular)
+        return compute([e.model for e in entries], *map(floats, COEFFICIENTS), radius)
+
     def ratios(self) -> FloatArray:
         """Per entry: the nearer channel's r_fold over r_corner (below 1: folds inside)."""
         m = self.metrics
@@ -187,16 +198,14 @@ class TCAAudit(CalibrationAudit):
         return summary
 
     def lines(self) -> list[str]:
-        from . import __version__
         from .formats.table import text_table
 
         summary = self.summary()
         models = ", ".join(f"{n} {m}" for m, n in summary["models"].items())
-        out = [
-            f"lensaudit {__version__}: {self.source.label}",
-            f"{summary['files']} file{'s' if summary['files'] != 1 else ''}, "
-            f"{summary['entries']} TCA entries, {summary['audited']} audited"
-            + (f" ({models})" if models else ""),
+        out = self.head_lines(summary, "TCA entries")
+        if models:
+            out[-1] += f" ({models})"
+        out += [
             "",
             "TCA r_d = r (b r^2 + c r + v) per channel, Hugin units (corner at hypot(aspect, 1))",
             f"Entries with a channel that folds inside the image: {summary['folds_in_image']}",
@@ -234,37 +243,7 @@ def audit_entries(
     entries: Sequence[TCAEntry], source: Any = None, files: list | None = None
 ) -> TCAAudit:
     """Compute the metrics of loaded TCA records (see :func:`compute`)."""
-    from . import database
-    from .metrics import image_radius, is_circular_fisheye
-
-    size = len(entries)
-    ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
-    rows = np.flatnonzero(ok)
-
-    def floats(name: str) -> FloatArray:
-        return np.fromiter((getattr(entries[i], name) for i in rows), np.float64, rows.size)
-
-    circular = [is_circular_fisheye(entries[i].lens, entries[i].type) for i in rows]
-    with np.errstate(all="ignore"):
-        radius = image_radius(floats("aspect_ratio"), circular)
-    computed = compute(
-        [entries[i].model for i in rows],
-        *map(floats, COEFFICIENTS),
-        radius,
-    )
-    metrics: dict[str, NDArray[Any]] = {}
-    for name, values in computed.items():
-        if name in BOOL_COLUMNS:
-            full = np.zeros(size, dtype=bool)
-        elif name == "severity":
-            full = np.full(size, "", dtype=object)
-        else:
-            full = np.full(size, np.nan)
-        full[rows] = values
-        metrics[name] = full
-    if source is None:
-        source = database.DatabaseSource((), "entries given in memory")
-    return TCAAudit(source, files or [], list(entries), metrics)
+    return TCAAudit.of_entries(entries, source, files)
 
 
 def audit(paths: Any = None) -> TCAAudit:
@@ -279,7 +258,7 @@ def audit(paths: Any = None) -> TCAAudit:
 
 def from_load(loaded: CalibrationLoad, source: Any = None) -> TCAAudit:
     """The TCA audit of records already read by :mod:`lensaudit.calibrations`."""
-    return audit_entries(loaded.tca, source, loaded.files)
+    return TCAAudit.from_load(loaded, source)
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:

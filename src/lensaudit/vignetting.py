@@ -34,7 +34,7 @@ Severity: ``error`` for zero_in_image, ``warning`` for low_in_image,
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from fractions import Fraction
 from typing import Any
 
@@ -267,6 +267,14 @@ class VignettingAudit(CalibrationAudit):
     FLOAT_COLUMNS = FLOAT_COLUMNS
     BOOL_COLUMNS = BOOL_COLUMNS
 
+    @staticmethod
+    def compute_audited(
+        entries: list[Any], floats: Callable[[str], FloatArray], circular: list[bool]
+    ) -> dict[str, NDArray[Any]]:
+        """:func:`compute` of audited records, each judged over its image."""
+        radius = image_radius(floats("aspect_ratio"), circular)
+        return compute(floats("k1"), floats("k2"), floats("k3"), radius)
+
     def worst(self, limit: int | None = None) -> list[int]:
         """Indices of the entries with a finding, by increasing c_min."""
         c_min = self.metrics["c_min"]
@@ -292,14 +300,10 @@ class VignettingAudit(CalibrationAudit):
         return summary
 
     def lines(self) -> list[str]:
-        from . import __version__
         from .formats.table import text_table
 
         summary = self.summary()
-        out = [
-            f"lensaudit {__version__}: {self.source.label}",
-            f"{summary['files']} file{'s' if summary['files'] != 1 else ''}, "
-            f"{summary['entries']} vignetting entries, {summary['audited']} audited",
+        out = self.head_lines(summary, "vignetting entries") + [
             "",
             "Vignetting C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6, r = 1 at half the diagonal "
             "(the frame corner; a circular fisheye's image circle at 1/hypot(aspect, 1))",
@@ -358,32 +362,7 @@ def audit_entries(
     entries: Sequence[VignettingEntry], source: Any = None, files: list | None = None
 ) -> VignettingAudit:
     """Compute the metrics of loaded vignetting records (see :func:`compute`)."""
-    from . import database
-    from .metrics import is_circular_fisheye
-
-    size = len(entries)
-    ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
-    rows = np.flatnonzero(ok)
-
-    def floats(name: str) -> FloatArray:
-        return np.fromiter((getattr(entries[i], name) for i in rows), np.float64, rows.size)
-
-    circular = [is_circular_fisheye(entries[i].lens, entries[i].type) for i in rows]
-    radius = image_radius(floats("aspect_ratio"), circular)
-    computed = compute(floats("k1"), floats("k2"), floats("k3"), radius)
-    metrics: dict[str, NDArray[Any]] = {}
-    for name, values in computed.items():
-        if name in BOOL_COLUMNS:
-            full = np.zeros(size, dtype=bool)
-        elif name == "severity":
-            full = np.full(size, "", dtype=object)
-        else:
-            full = np.full(size, np.nan)
-        full[rows] = values
-        metrics[name] = full
-    if source is None:
-        source = database.DatabaseSource((), "entries given in memory")
-    return VignettingAudit(source, files or [], list(entries), metrics)
+    return VignettingAudit.of_entries(entries, source, files)
 
 
 def audit(paths: Any = None) -> VignettingAudit:
@@ -398,7 +377,7 @@ def audit(paths: Any = None) -> VignettingAudit:
 
 def from_load(loaded: CalibrationLoad, source: Any = None) -> VignettingAudit:
     """The vignetting audit of records already read by :mod:`lensaudit.calibrations`."""
-    return audit_entries(loaded.vignetting, source, loaded.files)
+    return VignettingAudit.from_load(loaded, source)
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
