@@ -760,8 +760,8 @@ class CalibrationAudit:
     def write_csv(self, stream: Any) -> None:
         """One row per entry: floats in shortest round-trip form, ``inf``, or
         empty for values that do not apply; booleans ``true``/``false``."""
+        from .columns import format_floats
         from .formats.csv_format import text_column
-        from .pipeline import format_floats
 
         booleans = {True: "true", False: "false", None: ""}
         fields = []

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 from bisect import bisect_right
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from itertools import accumulate
@@ -470,19 +470,24 @@ def _compute(parts: list[FileColumns]) -> metrics.Metrics:
         return values
 
     audited = np.array(texts("status"), dtype=object) == STATUS_OK
-    return metrics.compute(
-        texts("model"),
-        floats("a"),
-        floats("b"),
-        floats("c"),
-        floats("k1"),
-        floats("k2"),
-        floats("crop_factor"),
-        floats("aspect_ratio"),
-        floats("focal"),
-        audited,
-        list(map(metrics.is_circular_fisheye, texts("lens"), texts("type"))),
-    )
+    circular = list(map(metrics.is_circular_fisheye, texts("lens"), texts("type")))
+    return _compute_columns(texts("model"), floats, audited, circular)
+
+
+#: The float columns :func:`lensaudit.metrics.compute` takes, in its order.
+_METRIC_INPUTS = ("a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
+
+
+def _compute_columns(
+    models: list[str],
+    floats: Callable[[str], np.ndarray],
+    audited: np.ndarray,
+    circular: list[bool],
+) -> metrics.Metrics:
+    """:func:`lensaudit.metrics.compute` of entries whose float columns ``floats`` gives."""
+    from . import metrics
+
+    return metrics.compute(models, *map(floats, _METRIC_INPUTS), audited, circular)
 
 
 def audit_entries(
@@ -501,19 +506,8 @@ def audit_entries(
         return np.fromiter(map(attrgetter(name), entries), np.float64, size)
 
     audited = np.array(list(map(attrgetter("status"), entries)), dtype=object) == STATUS_OK
-    result = metrics.compute(
-        list(map(attrgetter("model"), entries)),
-        floats("a"),
-        floats("b"),
-        floats("c"),
-        floats("k1"),
-        floats("k2"),
-        floats("crop_factor"),
-        floats("aspect_ratio"),
-        floats("focal"),
-        audited,
-        [metrics.is_circular_fisheye(e.lens, e.type) for e in entries],
-    )
+    circular = [metrics.is_circular_fisheye(e.lens, e.type) for e in entries]
+    result = _compute_columns(list(map(attrgetter("model"), entries)), floats, audited, circular)
     if source is None:
         source = database.DatabaseSource((), "entries given in memory")
     return Audit(source, files or [], entries, result)

@@ -14,6 +14,9 @@ from importlib import import_module
 from types import ModuleType
 from typing import TYPE_CHECKING, TextIO
 
+from ..columns import LEADING_COLUMNS, METRIC_COLUMNS, TRAILING_COLUMNS
+from ..loader import STATUS_OK
+
 if TYPE_CHECKING:
     from ..pipeline import Audit
 
@@ -26,6 +29,51 @@ ROW_FORMATS = ("csv", "json")
 def writer(name: str) -> Callable[[Audit, TextIO], None]:
     """The ``write(audit, stream)`` function of the named format."""
     return import_module(f"{__name__}.{FORMATS[name]}").write
+
+
+def split_rows(
+    columns: dict[str, list],
+    fields: Callable[[str, list], list[str]],
+    leading: Callable[[tuple[str, ...]], str],
+    trailing: Callable[[tuple[str, ...]], str],
+) -> tuple[list[str], list[str]]:
+    """Each row's text before its metrics and after them, for ``row_texts``:
+    ``fields(name, values)`` renders a column, ``leading`` and ``trailing``
+    join a row's fields of :data:`~lensaudit.columns.LEADING_COLUMNS` and
+    ``TRAILING_COLUMNS``."""
+    before = [fields(name, columns[name]) for name in LEADING_COLUMNS]
+    after = [fields(name, columns[name]) for name in TRAILING_COLUMNS]
+    return list(map(leading, zip(*before, strict=True))), list(
+        map(trailing, zip(*after, strict=True))
+    )
+
+
+def metric_fields(
+    metrics: dict[str, list],
+    statuses: list[str],
+    floats: Callable[[list[float]], list[str]],
+    tails: dict[int, str],
+    booleans: dict[bool, str],
+    not_audited: str,
+) -> list[list[str]]:
+    """The metric columns as texts, for ``metric_texts``: ``tail`` through
+    ``tails``, ``folds_in_image`` through ``booleans`` (``not_audited`` for an
+    entry that was not audited), the others through ``floats``."""
+    fields: list[list[str]] = []
+    for name in METRIC_COLUMNS:
+        values = metrics[name]
+        if name == "tail":
+            fields.append(list(map(tails.__getitem__, values)))
+        elif name == "folds_in_image":
+            fields.append(
+                [
+                    booleans[bool(fold)] if status == STATUS_OK else not_audited
+                    for fold, status in zip(values, statuses, strict=True)
+                ]
+            )
+        else:
+            fields.append(floats(values))
+    return fields
 
 
 def row_format(name: str) -> ModuleType:

@@ -17,16 +17,8 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, TextIO
 
-from ..columns import (
-    COLUMNS,
-    FLOAT_COLUMNS,
-    LEADING_COLUMNS,
-    METRIC_COLUMNS,
-    TAIL_NAMES,
-    TRAILING_COLUMNS,
-    format_floats,
-)
-from ..loader import STATUS_OK
+from ..columns import COLUMNS, FLOAT_COLUMNS, TAIL_NAMES, format_floats
+from . import metric_fields, split_rows
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -59,30 +51,13 @@ def _fields(name: str, values: list) -> list[str]:
 def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     """Each row's text before its metrics and after them, from the entry columns
     (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
-    leading = [_fields(name, columns[name]) for name in LEADING_COLUMNS]
-    trailing = [_fields(name, columns[name]) for name in TRAILING_COLUMNS]
-    return list(map(",".join, zip(*leading, strict=True))), list(
-        map(",".join, zip(*trailing, strict=True))
-    )
+    return split_rows(columns, _fields, ",".join, ",".join)
 
 
 def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
     """Each entry's metric fields, from the metric columns and the statuses (an
     entry that was not audited has no ``folds_in_image``)."""
-    fields: list[list[str]] = []
-    for name in METRIC_COLUMNS:
-        values = metrics[name]
-        if name == "tail":
-            fields.append(list(map(TAIL_NAMES.__getitem__, values)))
-        elif name == "folds_in_image":
-            fields.append(
-                [
-                    _BOOLEAN[bool(fold)] if status == STATUS_OK else ""
-                    for fold, status in zip(values, statuses, strict=True)
-                ]
-            )
-        else:
-            fields.append(format_floats(values))
+    fields = metric_fields(metrics, statuses, format_floats, TAIL_NAMES, _BOOLEAN, "")
     return list(map(",".join, zip(*fields, strict=True)))
 
 

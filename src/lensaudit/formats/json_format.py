@@ -28,7 +28,7 @@ from ..columns import (
     TRAILING_COLUMNS,
     float_texts,
 )
-from ..loader import STATUS_OK
+from . import metric_fields, split_rows
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -91,31 +91,13 @@ _TRAILING = _template(TRAILING_COLUMNS, first=False, last=True)
 def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     """Each entry's text before its metrics and after them, from the entry columns
     (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
-    leading = [_values(name, columns[name]) for name in LEADING_COLUMNS]
-    trailing = [_values(name, columns[name]) for name in TRAILING_COLUMNS]
-    return (
-        list(map(_LEADING.__mod__, zip(*leading, strict=True))),
-        list(map(_TRAILING.__mod__, zip(*trailing, strict=True))),
-    )
+    return split_rows(columns, _values, _LEADING.__mod__, _TRAILING.__mod__)
 
 
 def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
     """Each entry's metric items, from the metric columns and the statuses (an
     entry that was not audited has no ``folds_in_image``)."""
-    fields: list[list[str]] = []
-    for name in METRIC_COLUMNS:
-        values = metrics[name]
-        if name == "tail":
-            fields.append(list(map(_TAILS.__getitem__, values)))
-        elif name == "folds_in_image":
-            fields.append(
-                [
-                    _BOOLEAN[bool(fold)] if status == STATUS_OK else "null"
-                    for fold, status in zip(values, statuses, strict=True)
-                ]
-            )
-        else:
-            fields.append(_floats(values))
+    fields = metric_fields(metrics, statuses, _floats, _TAILS, _BOOLEAN, "null")
     return list(map(_METRICS.__mod__, zip(*fields, strict=True)))
 
 
