@@ -9,14 +9,19 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
-from .options import database_paths, fail, output_file, output_stream
+from .options import (
+    cache_option,
+    database_paths,
+    fail,
+    format_option,
+    output_file,
+    output_stream,
+)
 
 if TYPE_CHECKING:
     from ..fix import FixResult
     from ..pipeline import Audit
     from ..xmlpatch import FilePatch
-
-FORMAT_NAMES = ("table", "csv", "json")
 
 
 @click.command()
@@ -57,27 +62,14 @@ FORMAT_NAMES = ("table", "csv", "json")
     help="Largest change of D over the image, in pixels of a 6000x4000 frame, "
     "for an entry to count as fixed.",
 )
-@click.option(
-    "-f",
-    "--format",
-    "output_format",
-    type=click.Choice(FORMAT_NAMES),
-    default="table",
-    show_default=True,
-    help="table: results and the diff; csv: one row per entry; json: both as data.",
-)
+@format_option("table: results and the diff; csv: one row per entry; json: both as data.")
 @output_file
 @click.option(
     "--write",
     is_flag=True,
     help="Patch the XML files in place: only the fixed entries' coefficients change.",
 )
-@click.option(
-    "--cache/--no-cache",
-    default=True,
-    show_default=True,
-    help="Reuse files parsed by an earlier run when unchanged (as in scan).",
-)
+@cache_option
 def fix(
     paths: tuple[Path, ...],
     lens: str | None,

@@ -12,6 +12,8 @@ import click
 
 #: Exit status for bad usage or input that could not be read at all.
 EXIT_INPUT_ERROR = 2
+#: The output formats of the commands that write every entry (scan, fix).
+FORMAT_NAMES = ("table", "csv", "json")
 
 
 def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -32,6 +34,32 @@ def output_file(function: Callable[..., Any]) -> Callable[..., Any]:
         type=click.Path(path_type=Path, dir_okay=False, allow_dash=True),
         default=None,
         help="Write to FILE instead of standard output.",
+    )(function)
+
+
+def format_option(help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``-f/--format table|csv|json`` (default table, given as ``output_format``),
+    with ``help`` saying what each format holds for the command."""
+    return click.option(
+        "-f",
+        "--format",
+        "output_format",
+        type=click.Choice(FORMAT_NAMES),
+        default="table",
+        show_default=True,
+        help=help,
+    )
+
+
+def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``--cache/--no-cache``: the parse cache, on by default (scan, fix, report, plot)."""
+    return click.option(
+        "--cache/--no-cache",
+        default=True,
+        show_default=True,
+        help="Reuse what an earlier run made of files whose content is unchanged (the "
+        "cache is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR "
+        "or ~/.cache/lensaudit.",
     )(function)
 
 

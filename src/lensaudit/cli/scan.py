@@ -3,41 +3,25 @@
 from __future__ import annotations
 
 import gc
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import click
 
-from .options import database_paths, fail, output_file, output_stream
+from .options import (
+    cache_option,
+    database_paths,
+    fail,
+    format_option,
+    output_file,
+    output_stream,
+)
 
-FORMAT_NAMES = ("table", "csv", "json")
 KIND_NAMES = ("distortion", "vignetting", "tca")
-
-
-def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``--cache/--no-cache``: the parse cache, on by default (scan, report, plot)."""
-    return click.option(
-        "--cache/--no-cache",
-        default=True,
-        show_default=True,
-        help="Reuse what an earlier run made of files whose content is unchanged (the "
-        "cache is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR "
-        "or ~/.cache/lensaudit.",
-    )(function)
 
 
 @click.command()
 @database_paths
-@click.option(
-    "-f",
-    "--format",
-    "output_format",
-    type=click.Choice(FORMAT_NAMES),
-    default="table",
-    show_default=True,
-    help="table: readable summary; csv, json: every entry with its metrics.",
-)
+@format_option("table: readable summary; csv, json: every entry with its metrics.")
 @click.option(
     "-k",
     "--kind",
