@@ -14,12 +14,15 @@ import math
 import os
 import shutil
 import subprocess
+import sys
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lensaudit import history as history_module
 from lensaudit import loader
@@ -431,9 +434,19 @@ def test_until_makes_the_newest_revision_that_of_the_day(repo):
 
 def test_each_distinct_file_version_is_parsed_once(repo, monkeypatch):
     calls = []
-    real = loader.read_bytes
+    real_blob = history_module._parse_blob
+    real_parse = history_module._Auditor.parse
     monkeypatch.setattr(
-        loader, "read_bytes", lambda data, name: calls.append(data) or real(data, name)
+        history_module,
+        "_parse_blob",
+        lambda data, name, seen: calls.append(data) or real_blob(data, name, seen),
+    )
+    monkeypatch.setattr(
+        history_module._Auditor,
+        "parse",
+        lambda self, data, name, keep=False: (
+            calls.append(data) or real_parse(self, data, name, keep)
+        ),
     )
     result = audit_history(repo.path)
     objects = [
@@ -690,3 +703,173 @@ def test_introducing_commits_hold_the_entry_and_their_parents_do_not(lensfun_his
         assert identity in identities(introduced.commit.hash)
         for parent in introduced.commit.parents:
             assert identity not in identities(parent)
+
+
+# ------------------------------------------- file versions read piece by piece
+
+
+def _in_pieces(*versions: bytes) -> list[tuple]:
+    """Each version as the history reads it (piece by piece, pieces shared)."""
+    seen: dict = {}
+    results = [history_module._parse_blob(data, "f.xml", seen) for data in versions]
+    auditor = history_module._Auditor()
+    for result in results:
+        auditor.add_pieces(result[2])
+    out = []
+    for result in results:
+        parsed = auditor.assemble(result)
+        out.append(
+            (
+                parsed.entries,
+                parsed.error,
+                [auditor.idents.values[i] for i in parsed.idents],
+                [auditor.audit_keys.values[k] for k in parsed.audit_keys],
+                parsed.rectilinear,
+            )
+        )
+    return out
+
+
+def _whole(data: bytes) -> tuple:
+    """The same read the way the loader reads a file, whole."""
+    entries, error = loader.read_bytes(data, "f.xml")
+    count, identities, keys, rectilinear = history_module._summary(entries)
+    return count, error, identities, keys, rectilinear
+
+
+def _two_lenses() -> bytes:
+    return b"""<?xml version="1.0" encoding="utf-8"?>
+<!DOCTYPE lensdatabase SYSTEM "lensfun-database.dtd">
+<lensdatabase version="2">
+    <mount>
+        <name>Test Mount</name>
+    </mount>
+    <lens>
+        <maker>Alpha</maker>
+        <model>Alpha 24mm</model>
+        <mount>Test Mount</mount>
+        <cropfactor>1</cropfactor>
+        <calibration>
+            <distortion model="poly3" focal="24" k1="-0.02"/>
+        </calibration>
+    </lens>
+    <lens>
+        <maker>Beta</maker>
+        <model>Beta 50mm</model>
+        <mount>Test Mount</mount>
+        <cropfactor>1.5</cropfactor>
+        <type>fisheye</type>
+        <calibration>
+            <distortion model="ptlens" focal="50" a="0.01" b="-0.03" c="0.02"/>
+        </calibration>
+    </lens>
+</lensdatabase>
+"""
+
+
+# A lens with an entry, where it is no element.
+HIDDEN = b'<lens><calibration><distortion model="poly3" focal="5" k1="-0.1"/></calibration></lens>'
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        pytest.param(_two_lenses(), id="two lenses"),
+        pytest.param(
+            _two_lenses().replace(b"<lens>", b"<!-- " + HIDDEN + b" --><lens>", 1),
+            id="a lens in a comment",
+        ),
+        pytest.param(
+            _two_lenses().replace(b"<lens>", b"<![CDATA[" + HIDDEN + b"]]><lens>", 1),
+            id="a lens in CDATA",
+        ),
+        pytest.param(
+            _two_lenses()
+            .replace(b'.dtd">', b'.dtd" [<!ENTITY m "Alpha">]>')
+            .replace(b"<maker>", b"<maker>&m;", 1),
+            id="an entity of the document type",
+        ),
+        pytest.param(_two_lenses().replace(b"</lens>", b"", 1), id="a lens left open"),
+        pytest.param(
+            _two_lenses().replace(b"</lensdatabase>", b"</lensdatabase><lens></lens>"),
+            id="a lens after the root",
+        ),
+        pytest.param(
+            _two_lenses().replace(
+                b"</lensdatabase>",
+                b'<distortion model="poly3" focal="5" k1="-0.1"/></lensdatabase>',
+            ),
+            id="an entry outside any lens",
+        ),
+        pytest.param(
+            _two_lenses().replace(b"utf-8", b"ISO-8859-1").replace(b"Alpha", b"Alpha \xe9"),
+            id="another encoding",
+        ),
+        pytest.param(
+            _two_lenses().replace(b"<lensdatabase", b'<lensdatabase xmlns="urn:x"', 1),
+            id="a namespace",
+        ),
+        pytest.param(_two_lenses().replace(b"\n", b""), id="all on one line"),
+        pytest.param(b"<lensdatabase/>", id="no lens"),
+        pytest.param(b"", id="empty"),
+    ],
+)
+def test_a_file_read_in_pieces_holds_what_the_loader_reads_in_it(text):
+    assert _in_pieces(text) == [_whole(text)]
+
+
+def test_pieces_shared_by_versions_are_read_once_and_hold_the_same(monkeypatch):
+    first = _two_lenses()
+    second = first.replace(b"-0.02", b"-0.03")
+    calls = []
+    real = loader.entries_from_tree
+    monkeypatch.setattr(
+        loader, "entries_from_tree", lambda root, name: calls.append(1) or real(root, name)
+    )
+    expected = [_whole(first), _whole(second)]
+    calls.clear()
+    assert _in_pieces(first, second) == expected
+    assert len(calls) == 3 + 1  # the mount and both lenses of the first version, one changed lens
+
+
+def test_bundled_database_files_read_in_pieces_hold_what_the_loader_reads(bundled_db):
+    files = sorted(bundled_db.glob("*.xml"))
+    datas = [file.read_bytes() for file in files]
+    assert _in_pieces(*datas) == [_whole(data) for data in datas]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    position=st.integers(min_value=0, max_value=10_000),
+    snippet=st.sampled_from(
+        [b"<lens>", b"</lens>", b"<!--", b"-->", b"<![CDATA[", b"]]>", b"<", b"&", b"<camera>"]
+    ),
+    drop=st.integers(min_value=0, max_value=8),
+)
+def test_a_mutated_file_read_in_pieces_holds_what_the_loader_reads(position, snippet, drop):
+    base = _two_lenses()
+    position %= len(base)
+    text = base[:position] + snippet + base[position + drop :]
+    assert _in_pieces(base, text) == [_whole(base), _whole(text)]
+
+
+def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_path):
+    """A fresh process forks parsing workers (nothing has started threads yet);
+    this one, which has imported numpy, parses in a thread."""
+    since = ["--since", "2019-01-01"]
+    command = [sys.executable, "-m", "lensaudit", "history", str(lensfun_history), *since]
+    environment = dict(os.environ, LENSAUDIT_CACHE_DIR=str(tmp_path / "cache"))
+    subprocess.run(
+        [*command, "-o", str(tmp_path / "forked"), "--no-cache", "-q"],
+        check=True,
+        env=environment,
+        capture_output=True,
+    )
+    result = audit_history(lensfun_history, since="2019-01-01")
+    for name, write in (
+        ("history.csv", result.write_csv),
+        ("introduced.csv", result.write_introduced_csv),
+    ):
+        stream = io.StringIO()
+        write(stream)
+        assert (tmp_path / "forked" / name).read_text(encoding="utf-8") == stream.getvalue()

@@ -42,16 +42,18 @@ from operator import attrgetter
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, TextIO
 
-import numpy as np
-
-from . import __version__, loader, metrics
+from . import __version__, loader
+from .columns import COLUMNS, FLOAT_COLUMNS
 from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
-from .pipeline import COLUMNS, FLOAT_COLUMNS
 
+# numpy (and the modules that need it) is imported where used: file versions
+# are parsed in forked worker processes, which must be started before numpy
+# starts its threads.
 if TYPE_CHECKING:
     import pandas
     from matplotlib.figure import Figure
 
+    from . import metrics
     from .pipeline import Audit
 
 #: Where the database lives in the Lensfun repository.
@@ -506,6 +508,143 @@ class _Parsed:
     kept: list[DistortionEntry] | None = None
 
 
+#: What a run of entries holds, as plain data (a worker process sends it back
+#: marshalled): the number of entries, then, per audited entry, its identity,
+#: its audit key and whether its lens is rectilinear.
+_Summary = tuple[int, list[tuple], list[tuple], list[bool]]
+
+
+def _summary(entries: Sequence[DistortionEntry]) -> _Summary:
+    from .metrics import is_circular_fisheye
+
+    identities, keys, rectilinear = [], [], []
+    for entry in entries:
+        if entry.status != STATUS_OK:
+            continue
+        identity = entry_identity(entry)
+        identities.append(identity)
+        # What the metrics depend on: model, coefficients, crop, aspect, focal
+        # and whether the image is a circle.
+        keys.append(
+            (
+                entry.model,
+                identity[5],
+                entry.crop_factor,
+                entry.aspect_ratio,
+                entry.focal,
+                is_circular_fisheye(entry.lens, entry.type),
+            )
+        )
+        rectilinear.append(entry.type == "rectilinear")
+    return len(entries), identities, keys, rectilinear
+
+
+#: The top-level elements a file version is cut into: lenses, cameras, mounts.
+_PIECE = re.compile(rb"<(lens|camera|mount)>")
+_PLACEHOLDER_TAG = "lensaudit-piece"
+_PLACEHOLDER = f"<{_PLACEHOLDER_TAG}/>".encode()
+_DECLARED_ENCODING = re.compile(rb"""\A(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)""")
+
+#: A parsed file version as plain data (a worker process sends it back
+#: marshalled): its error or "", the digests of its pieces in order (empty:
+#: the file was read whole), and the summaries this process made for pieces
+#: it had not seen before (the whole file's under the digest b"").
+_Pieces = tuple[str, list[bytes], list[tuple[bytes, _Summary]]]
+
+
+def _internal_subset(data: bytes) -> bool:
+    """Whether the document type declares anything itself (entities, say); an
+    external one is never loaded."""
+    doctype = data.find(b"<!DOCTYPE")
+    return doctype >= 0 and b"[" in data[doctype : data.find(b">", doctype)]
+
+
+def _piece_spans(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of each ``<lens>...</lens>`` (camera, mount) in the text."""
+    spans = []
+    position = 0
+    while match := _PIECE.search(data, position):
+        closing = b"</" + match.group(1) + b">"
+        end = data.find(closing, match.end())
+        if end < 0:
+            break  # the skeleton will not parse
+        position = end + len(closing)
+        spans.append((match.start(), position))
+    return spans
+
+
+def _parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> _Pieces:
+    """What one file version holds, reading each distinct piece of it once.
+
+    Successive versions of a file share most of their lenses, so the file is
+    cut into its top-level ``<lens>``, ``<camera>`` and ``<mount>`` elements
+    (the pieces) by their text, each known by a digest of its bytes. The
+    rest of the file, with a placeholder element for each piece, must parse
+    as a ``<lensdatabase>`` whose children include exactly those
+    placeholders, and each piece must parse alone; then the file is
+    well-formed and its entries are those of its pieces in order, since an
+    entry's context comes from its own ``<lens>``. ``seen`` maps the digests
+    of the pieces this process has parsed to whether they parsed. A file
+    that does not qualify (not well-formed, namespaces, a DTD, an encoding
+    other than UTF-8, declarations in its document type, anything outside
+    the pieces holding entries) is read
+    whole, as the loader reads it.
+    """
+    from lxml import etree
+
+    made: list[tuple[bytes, _Summary]] = []
+
+    def whole() -> _Pieces:
+        entries, error = loader.read_bytes(data, name)
+        made.append((b"", _summary(entries)))
+        return error, [], made
+
+    declared = _DECLARED_ENCODING.match(data)
+    if (
+        b"xmlns" in data
+        or _internal_subset(data)
+        or _PLACEHOLDER_TAG.encode() in data
+        or (declared is not None and declared.group(1).lower() not in (b"utf-8", b"utf8"))
+    ):
+        return whole()
+    spans = _piece_spans(data)
+    if not spans:
+        return whole()
+    parser = loader.make_parser()
+    skeleton, position = [], 0
+    for start, end in spans:
+        skeleton += (data[position:start], _PLACEHOLDER)
+        position = end
+    skeleton.append(data[position:])
+    try:
+        root = etree.fromstring(b"".join(skeleton), parser)
+    except etree.XMLSyntaxError:
+        return whole()
+    if (
+        root.tag != loader.DATABASE_ROOT
+        or sum(child.tag == _PLACEHOLDER_TAG for child in root) != len(spans)
+        or next(root.iter("distortion"), None) is not None
+    ):
+        return whole()
+    digests = []
+    for start, end in spans:
+        piece = data[start:end]
+        digest = hashlib.blake2b(piece, digest_size=16).digest()
+        parsed = seen.get(digest)
+        if parsed is None:
+            try:
+                element = etree.fromstring(b"<lensdatabase>" + piece + b"</lensdatabase>", parser)
+            except etree.XMLSyntaxError:
+                element = None
+            seen[digest] = parsed = element is not None
+            if element is not None:
+                made.append((digest, _summary(list(loader.entries_from_tree(element, name)))))
+        if not parsed:
+            return whole()
+        digests.append(digest)
+    return "", digests, made
+
+
 class _Auditor:
     """Parses file versions, then audits each distinct (model, coefficients,
     crop factor, aspect ratio, focal, image circle) once, however many versions
@@ -515,34 +654,58 @@ class _Auditor:
         self.idents = _Interner()
         self.audit_keys = _Interner()
         self.metrics: metrics.Metrics | None = None
+        # piece digest -> (entries, interned identities, audit keys, rectilinear)
+        self.pieces: dict[bytes, tuple[int, list[int], list[int], list[bool]]] = {}
 
     def parse(self, data: bytes, name: str, keep: bool = False) -> _Parsed:
         entries, error = loader.read_bytes(data, name)
-        audited = [entry for entry in entries if entry.status == STATUS_OK]
-        idents, keys, rectilinear = [], [], []
-        for entry in audited:
-            identity = entry_identity(entry)
-            idents.append(self.idents(identity))
-            # What the metrics depend on: model, coefficients, crop, aspect, focal
-            # and whether the image is a circle.
-            circular = metrics.is_circular_fisheye(entry.lens, entry.type)
-            keys.append(
-                self.audit_keys(
-                    (
-                        entry.model,
-                        identity[5],
-                        entry.crop_factor,
-                        entry.aspect_ratio,
-                        entry.focal,
-                        circular,
-                    )
-                )
-            )
-            rectilinear.append(entry.type == "rectilinear")
-        return _Parsed(len(entries), error, idents, keys, rectilinear, audited if keep else None)
+        count, identities, keys, rectilinear = _summary(entries)
+        return _Parsed(
+            count,
+            error,
+            [self.idents(i) for i in identities],
+            [self.audit_keys(k) for k in keys],
+            rectilinear,
+            [e for e in entries if e.status == STATUS_OK] if keep else None,
+        )
+
+    def _intern(self, summary: _Summary) -> tuple[int, list[int], list[int], list[bool]]:
+        count, identities, keys, rectilinear = summary
+        return (
+            count,
+            [self.idents(tuple(i)) for i in identities],
+            [self.audit_keys(tuple(k)) for k in keys],
+            list(rectilinear),
+        )
+
+    def add_pieces(self, made: list[tuple[bytes, _Summary]]) -> None:
+        """Intern the summaries of pieces (see :func:`_parse_blob`) not seen yet."""
+        for digest, summary in made:
+            if digest and digest not in self.pieces:
+                self.pieces[digest] = self._intern(summary)
+
+    def assemble(self, result: _Pieces) -> _Parsed:
+        """A file version from :func:`_parse_blob`, once :meth:`add_pieces` has
+        seen the summaries of every file version of the run."""
+        error, digests, made = result
+        if not digests:
+            count, idents, keys, rectilinear = self._intern(dict(made)[b""])
+            return _Parsed(count, error, idents, keys, rectilinear)
+        parsed = _Parsed(0, error, [], [], [])
+        for digest in digests:
+            count, idents, keys, rectilinear = self.pieces[digest]
+            parsed.entries += count
+            parsed.idents.extend(idents)
+            parsed.audit_keys.extend(keys)
+            parsed.rectilinear.extend(rectilinear)
+        return parsed
 
     def finish(self, parsed: dict[str, _Parsed]) -> dict[str, _BlobAudit]:
         """Compute the metrics of every audit key at once, then count per file version."""
+        import numpy as np
+
+        from . import metrics
+
         keys = self.audit_keys.values
         size = len(keys)
         columns = {name: np.full(size, np.nan) for name in ("a", "b", "c", "k1", "k2")}
@@ -597,13 +760,15 @@ def _fingerprint() -> str:
     A cached audit is valid only for the code that made it; the version alone
     would not change while that code does.
     """
-    digest = hashlib.sha256(__version__.encode())
-    from . import normalizer, solver
+    from importlib.util import find_spec
 
-    for module in (loader, normalizer, solver, metrics):
-        source = getattr(module, "__file__", None)
-        if source:
-            digest.update(Path(source).read_bytes())
+    digest = hashlib.sha256(__version__.encode())
+    # Found, not imported: importing the solver would start numpy's threads
+    # before the parsing workers are forked.
+    for module in ("loader", "normalizer", "solver", "metrics"):
+        spec = find_spec(f"{__package__}.{module}")
+        if spec is not None and spec.origin:
+            digest.update(Path(spec.origin).read_bytes())
     digest.update(Path(__file__).read_bytes())
     return f"{__version__}-{digest.hexdigest()[:16]}"
 
@@ -823,13 +988,7 @@ def audit_history(
     cached = len(audits)
     keep = set(newest_files.values())
     to_parse = [b for b in blobs if b not in audits or b in keep]
-    parsed = {}
-    for done, (blob, answer) in enumerate(zip(to_parse, git.objects(to_parse), strict=True), 1):
-        if answer is None:
-            raise HistoryError(f"git cannot read object {blob} of {repository}")
-        parsed[blob] = auditor.parse(answer[2], names[blob], keep=blob in keep)
-        if progress is not None:
-            progress(done, len(to_parse))
+    parsed = _parse_blobs(git, to_parse, names, keep, auditor, progress)
     fresh = auditor.finish(parsed)
     if cache:
         cache.put({blob: audit for blob, audit in fresh.items() if blob not in audits})
@@ -871,6 +1030,46 @@ def audit_history(
         seconds=time.perf_counter() - started,
         warnings=warnings,
     )
+
+
+def _parse_blobs(
+    git: _Git,
+    blobs: list[str],
+    names: dict[str, str],
+    keep: set[str],
+    auditor: _Auditor,
+    progress: Callable[[int, int], None] | None,
+) -> dict[str, _Parsed]:
+    """Parse file versions: read through one ``git cat-file --batch``, then
+    parsed in worker processes (:mod:`lensaudit.workers`) while this process
+    parses those whose entries are kept (the newest revision's)."""
+    from . import workers
+
+    contents: dict[str, bytes] = {}
+    for done, (blob, answer) in enumerate(zip(blobs, git.objects(blobs), strict=True), 1):
+        if answer is None:
+            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
+        contents[blob] = answer[2]
+        if progress is not None:
+            progress(done, len(blobs))
+    others = [blob for blob in blobs if blob not in keep]
+    jobs = [workers.Job(Path(names[blob]), names[blob], contents[blob]) for blob in others]
+    seen: dict[bytes, bool] = {}  # pieces parsed, per process (each worker has its copy)
+    parsed: dict[str, _Parsed] = {}
+
+    def parse_kept() -> None:
+        for blob in blobs:
+            if blob in keep:
+                parsed[blob] = auditor.parse(contents[blob], names[blob], keep=True)
+
+    results = workers.parse_all(
+        jobs, lambda job: _parse_blob(job.data or b"", job.name, seen), parse_kept
+    )
+    for result in results:
+        auditor.add_pieces(result[2])
+    for blob, result in zip(others, results, strict=True):
+        parsed[blob] = auditor.assemble(result)
+    return parsed
 
 
 def _file_maps(
@@ -922,6 +1121,8 @@ def _introduced(
     commits: list[Commit],
 ) -> list[IntroducedEntry]:
     """Entries of the newest revision with a finite r_max, with their introducers."""
+    import numpy as np
+
     m = auditor.metrics
     assert m is not None
     introduced = []
@@ -1007,6 +1208,7 @@ def trend_figure(history_frame: pandas.DataFrame, title: str | None = None) -> F
     and in the paper's mixed units (rectilinear lenses, as in the paper).
     The paper's snapshot date is marked on both.
     """
+    import numpy as np
     import pandas
     from matplotlib.figure import Figure
 
