@@ -44,8 +44,6 @@ from .loader import (
     STATUS_XML_ERROR,
     LensContext,
     SourceFile,
-    attribute_number,
-    quoted,
     status_of,
 )
 
@@ -151,7 +149,6 @@ SPECS = {
 }
 #: Model names each kind can audit.
 MODELS = {kind: tuple(spec.models) for kind, spec in SPECS.items()}
-_POSITIVE = ("focal", "aperture", "distance")
 
 
 @dataclass(slots=True)
@@ -241,27 +238,8 @@ def _entry(spec: _Spec, element: etree._Element, name: str, context: LensContext
 
 def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: LensContext) -> Any:
     """The record of one element, every problem noted."""
-    attributes = element.attrib
-    problems: list[tuple[str, str]] = []
-    model = (attributes.get("model") or "").strip()
-    if not model:
-        problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
-    values: dict[str, float] = {}
-    for attribute in spec.required:
-        values[attribute] = attribute_number(attributes, attribute, None, problems)
-    for attribute in _POSITIVE:
-        value = values.get(attribute, NAN)
-        if value <= 0:
-            problems.append((STATUS_BAD_VALUE, f"{attribute}={value:g} is not positive"))
-    defaults = spec.models.get(model)
-    if defaults is not None:
-        for attribute, default in defaults.items():
-            values[attribute] = attribute_number(attributes, attribute, default, problems)
-    elif model:
-        known = ", ".join(spec.models)
-        problems.append((STATUS_UNKNOWN_MODEL, f"model {quoted(model)} is not one of {known}"))
-    if context.problem:
-        problems.append((context.status, context.problem))
+    required = [(attribute, None) for attribute in spec.required]
+    model, values, problems = loader.checked_attributes(element, required, spec.models, context)
     record = _record(
         spec,
         name,

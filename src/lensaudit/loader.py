@@ -433,35 +433,72 @@ def _entry(element: etree._Element, name: str, context: LensContext) -> Distorti
 
 def _checked_entry(element: etree._Element, name: str, context: LensContext) -> DistortionEntry:
     """The record of one ``<distortion>`` element, every problem noted."""
+    # Without a real-focal= attribute, the <real-focal-length> of its focal length.
+    required = (
+        ("focal", None),
+        ("real-focal", lambda values: context.real_focals.get(values["focal"], NAN)),
+    )
+    model, values, problems = checked_attributes(element, required, _MODEL_DEFAULTS, context)
+    status, message = status_of(problems)
+    layout = [values.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")]
+    return context.record(
+        name,
+        element.sourceline or 0,
+        model,
+        values["focal"],
+        values["real-focal"],
+        layout,
+        status,
+        message,
+    )
+
+
+#: Per model, each coefficient attribute and its default.
+_MODEL_DEFAULTS = {model: dict.fromkeys(names, 0.0) for model, names in MODEL_COEFFICIENTS.items()}
+
+#: The default of a required attribute: None (it must be given), a number, or
+#: a function of the values of the attributes before it.
+AttributeDefault = float | Callable[[dict[str, float]], float] | None
+
+
+def checked_attributes(
+    element: etree._Element,
+    required: Sequence[tuple[str, AttributeDefault]],
+    models: dict[str, dict[str, float]],
+    context: LensContext,
+) -> tuple[str, dict[str, float], list[tuple[str, str]]]:
+    """(model, values, problems) of a calibration element, every problem noted.
+
+    Reads ``model=``, then each ``required`` attribute, which must be positive,
+    then the coefficients of the model (``models``: model -> attribute ->
+    default). ``problems`` are (status, message) pairs, the lens context's
+    own problem last (see :func:`status_of`); a value that could not be read
+    is NaN.
+    """
     attributes = element.attrib
     problems: list[tuple[str, str]] = []
     model = (attributes.get("model") or "").strip()
     if not model:
         problems.append((STATUS_MISSING_ATTRIBUTE, "missing model="))
-    focal = attribute_number(attributes, "focal", None, problems)
-    real_focal = attribute_number(
-        attributes, "real-focal", context.real_focals.get(focal, NAN), problems
-    )
-    for attribute, value in (("focal", focal), ("real-focal", real_focal)):
+    values: dict[str, float] = {}
+    for attribute, default in required:
+        if callable(default):
+            default = default(values)
+        values[attribute] = attribute_number(attributes, attribute, default, problems)
+    for attribute, _ in required:
+        value = values[attribute]
         if value <= 0:
             problems.append((STATUS_BAD_VALUE, f"{attribute}={value:g} is not positive"))
-    coefficients = {}
-    names = MODEL_COEFFICIENTS.get(model)
-    if names is not None:
-        coefficients = {
-            attribute: attribute_number(attributes, attribute, 0.0, problems) for attribute in names
-        }
+    defaults = models.get(model)
+    if defaults is not None:
+        for attribute, default in defaults.items():
+            values[attribute] = attribute_number(attributes, attribute, default, problems)
     elif model:
-        problems.append(
-            (STATUS_UNKNOWN_MODEL, f"model {quoted(model)} is not one of ptlens, poly3, poly5")
-        )
+        known = ", ".join(models)
+        problems.append((STATUS_UNKNOWN_MODEL, f"model {quoted(model)} is not one of {known}"))
     if context.problem:
         problems.append((context.status, context.problem))
-    status, message = status_of(problems)
-    layout = [coefficients.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")]
-    return context.record(
-        name, element.sourceline or 0, model, focal, real_focal, layout, status, message
-    )
+    return model, values, problems
 
 
 def status_of(problems: list[tuple[str, str]]) -> tuple[str, str]:
