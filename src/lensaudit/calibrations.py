@@ -422,19 +422,20 @@ def as_written(value: float) -> Fraction:
     return Fraction(repr(float(value)))
 
 
-def _sign(value: Fraction | int) -> int:
+def sign_of(value: Fraction | int) -> int:
+    """-1, 0 or 1: the sign of an exact number."""
     return (value > 0) - (value < 0)
 
 
 def sign_of_surd(u: Fraction, v: Fraction, d: Fraction) -> int:
     """Sign of u + v sqrt(d) for d >= 0, exactly."""
-    su, sv = _sign(u), _sign(v) if d else 0
+    su, sv = sign_of(u), sign_of(v) if d else 0
     if sv == 0:
         return su
     if su == 0 or su == sv:
         return sv
     # Opposite signs: the larger square wins.
-    return su * _sign(u * u - v * v * d)
+    return su * sign_of(u * u - v * v * d)
 
 
 def _sqrt_fraction(d: Fraction, bits: int = 160) -> Fraction:
@@ -465,12 +466,12 @@ class ExactTurn:
 
     def sign_minus(self, bound: Fraction) -> int:
         """Sign of x - bound."""
-        return sign_of_surd(self.p - bound * self.q, Fraction(self.e), self.d) * _sign(self.q)
+        return sign_of_surd(self.p - bound * self.q, Fraction(self.e), self.d) * sign_of(self.q)
 
     def value(self) -> Fraction:
         """x to about 2^-150 relative."""
         root = self.e * _sqrt_fraction(self.d)
-        if _sign(self.p) * _sign(root) < 0:
+        if sign_of(self.p) * sign_of(root) < 0:
             # p + e sqrt(d) would cancel: (p^2 - d) / (p - e sqrt(d)) does not.
             return (self.p * self.p - self.d) / ((self.p - root) * self.q)
         return (self.p + root) / self.q
@@ -624,6 +625,14 @@ class CalibrationAudit:
     def from_load(cls, loaded: CalibrationLoad, source: Any = None) -> Any:
         """The audit of the records of this kind in ``loaded``."""
         return cls.of_entries(loaded.entries(cls.kind), source, loaded.files)
+
+    @classmethod
+    def read(cls, paths: Any = None) -> Any:
+        """Audit the entries of this kind in database directories and/or XML
+        files (the bundled database without ``paths``). Raises
+        :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
+        source, loaded = load(paths)
+        return cls.from_load(loaded, source)
 
     @staticmethod
     def compute_audited(
@@ -788,6 +797,29 @@ class CalibrationAudit:
 
         json.dump(self.document(), stream, indent=1, allow_nan=False)
         stream.write("\n")
+
+
+def findings_of(
+    records: Iterable[dict[str, Any]],
+    element: str,
+    finding: Callable[[dict[str, Any]], tuple[str, str, str] | None],
+) -> list[Finding]:
+    """The findings of the records of one kind, by file and line: an error for
+    each that could not be audited (see :func:`status_findings`), and for each
+    audited one, what ``finding`` says of it, (severity, code, text) or None,
+    its text led by the entry's name."""
+    records = list(records)
+    found = status_findings(records, element)
+    for record in records:
+        if record["status"] != STATUS_OK:
+            continue
+        result = finding(record)
+        if result is not None:
+            severity, code, text = result
+            name = describe(record, element)
+            found.append((severity, code, record["file"], record["line"], f"{name}: {text}"))
+    found.sort(key=lambda f: (f[2], f[3]))
+    return found
 
 
 def status_findings(records: Iterable[dict[str, Any]], element: str) -> list[Finding]:

@@ -31,15 +31,11 @@ from .calibrations import (
     SEVERITY_ERROR,
     TCA,
     CalibrationAudit,
-    CalibrationLoad,
     Finding,
-    TCAEntry,
-    describe,
+    findings_of,
     sign_change_before,
-    status_findings,
 )
 from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
-from .loader import STATUS_OK
 
 FloatArray = NDArray[np.float64]
 
@@ -239,26 +235,10 @@ class TCAAudit(CalibrationAudit):
         return out + self.problem_lines()
 
 
-def audit_entries(
-    entries: Sequence[TCAEntry], source: Any = None, files: list | None = None
-) -> TCAAudit:
-    """Compute the metrics of loaded TCA records (see :func:`compute`)."""
-    return TCAAudit.of_entries(entries, source, files)
-
-
-def audit(paths: Any = None) -> TCAAudit:
-    """Audit the TCA entries of database directories and/or XML files (the
-    bundled database without ``paths``). Raises
-    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
-    from .calibrations import load
-
-    source, loaded = load(paths)
-    return from_load(loaded, source)
-
-
-def from_load(loaded: CalibrationLoad, source: Any = None) -> TCAAudit:
-    """The TCA audit of records already read by :mod:`lensaudit.calibrations`."""
-    return TCAAudit.from_load(loaded, source)
+# The module's entry points are the audit class's.
+audit_entries = TCAAudit.of_entries
+audit = TCAAudit.read
+from_load = TCAAudit.from_load
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
@@ -271,26 +251,23 @@ def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
     ``records`` are dicts with :data:`COLUMNS` keys, as
     :meth:`TCAAudit.records` gives them.
     """
-    records = list(records)
-    found = status_findings(records, "tca")
-    for record in records:
-        if record["status"] != STATUS_OK or not record["folds_in_image"]:
-            continue
-        r_corner = record["r_corner"]
-        parts = []
-        for channel in CHANNELS:
-            radius = record[f"r_fold_{channel}"]
-            if radius == 0:
-                parts.append(f"the {channel} channel's r_d decreases from the centre")
-            elif radius < r_corner:
-                parts.append(f"the {channel} channel's r_d peaks at r = {radius:.4g}")
-        text = (
-            f"{' and '.join(parts)}, inside the image (to r = {r_corner:.4g}, Hugin units): "
-            "the correction maps two radii onto one and mirrors that channel beyond"
-        )
-        name = describe(record, "tca")
-        found.append(
-            (SEVERITY_ERROR, FOLD_IN_IMAGE, record["file"], record["line"], f"{name}: {text}")
-        )
-    found.sort(key=lambda f: (f[2], f[3]))
-    return found
+    return findings_of(records, "tca", _finding)
+
+
+def _finding(record: dict[str, Any]) -> tuple[str, str, str] | None:
+    """(severity, code, text) of an audited record, or None."""
+    if not record["folds_in_image"]:
+        return None
+    r_corner = record["r_corner"]
+    parts = []
+    for channel in CHANNELS:
+        radius = record[f"r_fold_{channel}"]
+        if radius == 0:
+            parts.append(f"the {channel} channel's r_d decreases from the centre")
+        elif radius < r_corner:
+            parts.append(f"the {channel} channel's r_d peaks at r = {radius:.4g}")
+    text = (
+        f"{' and '.join(parts)}, inside the image (to r = {r_corner:.4g}, Hugin units): "
+        "the correction maps two radii onto one and mirrors that channel beyond"
+    )
+    return SEVERITY_ERROR, FOLD_IN_IMAGE, text

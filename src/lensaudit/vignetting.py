@@ -34,7 +34,7 @@ Severity: ``error`` for zero_in_image, ``warning`` for low_in_image,
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from fractions import Fraction
 from typing import Any
 
@@ -48,22 +48,18 @@ from .calibrations import (
     SEVERITY_WARNING,
     VIGNETTING,
     CalibrationAudit,
-    CalibrationLoad,
     ExactTurn,
     Finding,
-    VignettingEntry,
-    _sign,
     as_written,
-    describe,
     exact_turning_points,
+    findings_of,
     sign_change_before,
+    sign_of,
     sign_of_surd,
-    status_findings,
     to_float,
     turning_points,
 )
 from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
-from .loader import STATUS_OK
 
 FloatArray = NDArray[np.float64]
 
@@ -166,7 +162,7 @@ def exact_below(
     def hit(sign: int) -> bool:
         return sign < 0 if strict else sign <= 0
 
-    if hit(_sign(1 + limit * (a1 + limit * (a2 + limit * a3)) - threshold)):
+    if hit(sign_of(1 + limit * (a1 + limit * (a2 + limit * a3)) - threshold)):
         return True
     turns = _turns_inside(k1, k2, k3, limit)
     if not turns:
@@ -175,7 +171,7 @@ def exact_below(
     for turn in turns:
         # C(x) - threshold = (rho1 (p + e sqrt d) + (rho0 - threshold) q) / q
         sign = sign_of_surd(rho1 * turn.p + (rho0 - threshold) * turn.q, rho1 * turn.e, turn.d)
-        if hit(sign * _sign(turn.q)):
+        if hit(sign * sign_of(turn.q)):
             return True
     return False
 
@@ -358,26 +354,10 @@ class VignettingAudit(CalibrationAudit):
         return out + self.problem_lines()
 
 
-def audit_entries(
-    entries: Sequence[VignettingEntry], source: Any = None, files: list | None = None
-) -> VignettingAudit:
-    """Compute the metrics of loaded vignetting records (see :func:`compute`)."""
-    return VignettingAudit.of_entries(entries, source, files)
-
-
-def audit(paths: Any = None) -> VignettingAudit:
-    """Audit the vignetting entries of database directories and/or XML files
-    (the bundled database without ``paths``). Raises
-    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
-    from .calibrations import load
-
-    source, loaded = load(paths)
-    return from_load(loaded, source)
-
-
-def from_load(loaded: CalibrationLoad, source: Any = None) -> VignettingAudit:
-    """The vignetting audit of records already read by :mod:`lensaudit.calibrations`."""
-    return VignettingAudit.from_load(loaded, source)
+# The module's entry points are the audit class's.
+audit_entries = VignettingAudit.of_entries
+audit = VignettingAudit.read
+from_load = VignettingAudit.from_load
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
@@ -391,43 +371,40 @@ def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
     (warning), ``vignetting-not-monotone`` (notice), and the status codes
     ``missing-attribute``, ``bad-value``, ``unknown-model``, ``no-lens``.
     """
-    records = list(records)
-    found = status_findings(records, "vignetting")
-    for record in records:
-        if record["status"] != STATUS_OK:
-            continue
-        severity = record["severity"]
-        if not severity:
-            continue
-        name = describe(record, "vignetting")
-        c_min, r_min, r_corner = record["c_min"], record["r_min"], record["r_corner"]
-        where = "the frame corner" if r_corner == 1 else "the image circle"
-        at = f"r = {r_min:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g}, {where})"
-        if severity == SEVERITY_ERROR:
-            code = ZERO_IN_IMAGE
-            r_zero = record["r_zero"]
-            crossing = (
-                f"crossing zero at r = {r_zero:.4g}"
-                if r_zero <= r_corner
-                else "touching zero without crossing"
-            )
-            text = (
-                f"C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6 reaches {c_min:.4g} at {at}, "
-                f"{crossing}: the correction divides by zero there and flips the sign "
-                "of the pixels where C < 0"
-            )
-        elif severity == SEVERITY_WARNING:
-            code = LOW_IN_IMAGE
-            text = (
-                f"C(r) falls to {c_min:.4g} at {at}: the correction multiplies those pixels "
-                f"(and their noise) by {1 / c_min:.3g}"
-            )
-        else:
-            code = NOT_MONOTONE
-            text = (
-                f"C(r) turns at r = {record['r_turn']:.4g}, inside the image "
-                f"(to {r_corner:.3g}): the brightness model is not monotone"
-            )
-        found.append((severity, code, record["file"], record["line"], f"{name}: {text}"))
-    found.sort(key=lambda f: (f[2], f[3]))
-    return found
+    return findings_of(records, "vignetting", _finding)
+
+
+def _finding(record: dict[str, Any]) -> tuple[str, str, str] | None:
+    """(severity, code, text) of an audited record, or None."""
+    severity = record["severity"]
+    if not severity:
+        return None
+    c_min, r_min, r_corner = record["c_min"], record["r_min"], record["r_corner"]
+    where = "the frame corner" if r_corner == 1 else "the image circle"
+    at = f"r = {r_min:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g}, {where})"
+    if severity == SEVERITY_ERROR:
+        code = ZERO_IN_IMAGE
+        r_zero = record["r_zero"]
+        crossing = (
+            f"crossing zero at r = {r_zero:.4g}"
+            if r_zero <= r_corner
+            else "touching zero without crossing"
+        )
+        text = (
+            f"C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6 reaches {c_min:.4g} at {at}, "
+            f"{crossing}: the correction divides by zero there and flips the sign "
+            "of the pixels where C < 0"
+        )
+    elif severity == SEVERITY_WARNING:
+        code = LOW_IN_IMAGE
+        text = (
+            f"C(r) falls to {c_min:.4g} at {at}: the correction multiplies those pixels "
+            f"(and their noise) by {1 / c_min:.3g}"
+        )
+    else:
+        code = NOT_MONOTONE
+        text = (
+            f"C(r) turns at r = {record['r_turn']:.4g}, inside the image "
+            f"(to {r_corner:.3g}): the brightness model is not monotone"
+        )
+    return severity, code, text
