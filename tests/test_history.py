@@ -469,12 +469,42 @@ def test_the_disk_cache_spares_parsing_and_changes_nothing(repo, tmp_path, monke
     monkeypatch.setattr(
         loader, "read_bytes", lambda data, name: calls.append(name) or real(data, name)
     )
-    second = audit_history(repo.path, cache_dir=tmp_path)
+    # Another selection of the same commits: not the same run, the same file versions.
+    second = audit_history(repo.path, cache_dir=tmp_path, since="2000-01-01")
     assert first.blobs_cached == 0 and second.blobs_cached == second.blobs
     # Only the newest revision's files are read again, for their entries in full.
     assert sorted(calls) == ["a.xml", "c.xml", "d.xml"] and second.blobs_parsed == 3
     assert second.records() == first.records()
     assert second.introduced_records() == first.introduced_records()
+
+
+def csv_text(result) -> tuple[str, str]:
+    """history.csv and introduced.csv of a result."""
+    texts = []
+    for write in (result.write_csv, result.write_introduced_csv):
+        stream = io.StringIO()
+        write(stream)
+        texts.append(stream.getvalue())
+    return texts[0], texts[1]
+
+
+def test_the_same_run_again_is_read_from_the_cache_whole(repo, tmp_path, monkeypatch):
+    first = audit_history(repo.path, cache_dir=tmp_path)
+    calls = []
+    monkeypatch.setattr(history_module, "_parse_blobs", lambda *args: calls.append(args))
+    second = audit_history(repo.path, cache_dir=tmp_path)
+    assert calls == [] and second.blobs_parsed == 0 and second.blobs_cached == first.blobs
+    assert csv_text(second) == csv_text(first)  # as written: NaN never equals itself
+    assert (second.newest, second.commits, second.path) == (first.newest, first.commits, first.path)
+
+
+def test_a_run_of_another_revision_is_not_taken_from_the_cache(repo, tmp_path):
+    audit_history(repo.path, cache_dir=tmp_path)
+    older = audit_history(repo.path, revision=repo.commits["c4"], cache_dir=tmp_path)
+    alone = audit_history(repo.path, revision=repo.commits["c4"])
+    assert older.newest.hash == repo.commits["c4"]
+    assert older.records() == alone.records()
+    assert older.introduced_records() == alone.introduced_records()
 
 
 def test_the_cache_is_keyed_by_lensaudit_version(repo, tmp_path, monkeypatch):

@@ -36,7 +36,7 @@ import threading
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from datetime import datetime
 from operator import attrgetter
 from pathlib import Path, PurePosixPath
@@ -794,6 +794,9 @@ class _BlobCache:
             self.connection.execute(
                 "CREATE TABLE IF NOT EXISTS blob (oid TEXT PRIMARY KEY, audit BLOB NOT NULL)"
             )
+            self.connection.execute(
+                "CREATE TABLE IF NOT EXISTS run (key TEXT PRIMARY KEY, history BLOB NOT NULL)"
+            )
         except (OSError, sqlite3.Error) as error:
             self._disable(error)
 
@@ -843,9 +846,106 @@ class _BlobCache:
         except sqlite3.Error as error:
             self._disable(error)
 
+    def get_run(self, key: str) -> History | None:
+        """The history a run with this key gave, or None."""
+        if self.connection is None:
+            return None
+        try:
+            row = self.connection.execute(
+                "SELECT history FROM run WHERE key = ?", (key,)
+            ).fetchone()
+            return (
+                None if row is None else _history_from_data(marshal.loads(zlib.decompress(row[0])))
+            )
+        except (sqlite3.Error, zlib.error, ValueError, EOFError, TypeError) as error:
+            self._disable(error)
+            return None
+
+    def put_run(self, key: str, history: History) -> None:
+        """Keep the history of a run; only the latest run is kept."""
+        if self.connection is None:
+            return
+        try:
+            stored = zlib.compress(marshal.dumps(_history_data(history)), 1)
+            with self.connection:
+                self.connection.execute("DELETE FROM run")
+                self.connection.execute(
+                    "INSERT INTO run (key, history) VALUES (?, ?)", (key, stored)
+                )
+        except (sqlite3.Error, ValueError) as error:
+            self._disable(error)
+
     def close(self) -> None:
         if self.connection is not None:
             self.connection.close()
+
+
+def _commit_data(commit: Commit | None) -> tuple | None:
+    return None if commit is None else tuple(getattr(commit, f.name) for f in fields(Commit))
+
+
+def _history_data(history: History) -> tuple:
+    """A history as marshal data (what a run's cache keeps)."""
+    entry_fields = [f.name for f in fields(DistortionEntry)]
+    return (
+        history.path,
+        history.first_parent,
+        [
+            (_commit_data(r.commit), r.mainline, r.files, tuple(r.counts.values()), r.errors)
+            for r in history.revisions
+        ],
+        _commit_data(history.newest),
+        [
+            (
+                tuple(getattr(i.entry, name) for name in entry_fields),
+                i.r_max,
+                i.d_max,
+                i.r_normalized,
+                i.r_normalized_paper,
+                i.folds_in_image,
+                _commit_data(i.commit),
+            )
+            for i in history.introduced
+        ],
+        history.commits,
+        history.blobs,
+    )
+
+
+def _history_from_data(data: tuple) -> History:
+    """The history :func:`_history_data` kept (repository and timings to be filled in)."""
+    path, first_parent, revisions, newest, introduced, commits, blobs = data
+    commit_of: dict[tuple, Commit] = {}
+
+    def commit(values: tuple | None) -> Commit | None:
+        if values is None:
+            return None
+        if values not in commit_of:
+            commit_of[values] = Commit(*values)
+        return commit_of[values]
+
+    return History(
+        repository=Path(),
+        path=path,
+        revision="",
+        first_parent=first_parent,
+        revisions=[
+            Revision(
+                commit(c), mainline, files, dict(zip(COUNT_COLUMNS, counts, strict=True)), errors
+            )
+            for c, mainline, files, counts, errors in revisions
+        ],
+        newest=commit(newest),
+        introduced=[
+            IntroducedEntry(DistortionEntry(*entry), *values, commit(c))
+            for entry, *values, c in introduced
+        ],
+        commits=commits,
+        blobs=blobs,
+        blobs_parsed=0,
+        blobs_cached=blobs,
+        seconds=0.0,
+    )
 
 
 # ----------------------------------------------------------------- introductions
@@ -956,6 +1056,24 @@ def audit_history(
         raise HistoryError(f"{revision!r} is not a commit of {repository}") from None
     filters = [f"--since={d}" for d in [_git_date(since, end_of_day=False)] if d]
     filters += [f"--until={d}" for d in [_git_date(until, end_of_day=True)] if d]
+    warnings: list[str] = []
+    auditor = _Auditor()
+    cache = _BlobCache(Path(cache_dir), auditor.idents, warnings) if cache_dir else None
+    # A commit names its whole history: the same selection of it gives the same audit.
+    run_key = repr((tip, db_path, filters, first_parent, time.tzname, time.timezone))
+    if cache:
+        stored = cache.get_run(run_key)
+        if stored is not None:
+            cache.close()
+            return replace(
+                stored,
+                repository=Path(repository),
+                revision=revision,
+                blobs_parsed=0,
+                blobs_cached=stored.blobs,
+                seconds=time.perf_counter() - started,
+                warnings=warnings,
+            )
     commits = _commits(git, tip, filters + (["--first-parent"] if first_parent else []))
     mainline = git.run("rev-list", "--first-parent", *filters, tip, "--").split()
     if not commits or not mainline:
@@ -978,12 +1096,9 @@ def audit_history(
     # are reported in full. Every other file version is parsed at most once.
     newest = commits[position[mainline[0]]]
     newest_files = files[newest.hash]
-    warnings: list[str] = []
-    auditor = _Auditor()
     blobs = sorted({blob for m in files.values() for blob in m.values()})
     names = {blob: name for m in files.values() for name, blob in m.items()}
     names.update((blob, name) for name, blob in newest_files.items())
-    cache = _BlobCache(Path(cache_dir), auditor.idents, warnings) if cache_dir else None
     audits = cache.get(blobs) if cache else {}
     cached = len(audits)
     keep = set(newest_files.values())
@@ -992,7 +1107,6 @@ def audit_history(
     fresh = auditor.finish(parsed)
     if cache:
         cache.put({blob: audit for blob, audit in fresh.items() if blob not in audits})
-        cache.close()
     audits.update(fresh)
 
     # Walk parents before children, keeping each commit's file states.
@@ -1015,7 +1129,7 @@ def audit_history(
         revisions.append(_revision(commit, commit.hash in mainline_set, mine, audits))
 
     introduced = _introduced(newest_files, states[newest.hash], parsed, auditor, commits)
-    return History(
+    result = History(
         repository=Path(repository),
         path=db_path,
         revision=revision,
@@ -1030,6 +1144,10 @@ def audit_history(
         seconds=time.perf_counter() - started,
         warnings=warnings,
     )
+    if cache:
+        cache.put_run(run_key, result)
+        cache.close()
+    return result
 
 
 def _parse_blobs(
