@@ -50,6 +50,9 @@ COLUMNS = (*LENS_COLUMNS, *COEFFICIENTS, *METRIC_COLUMNS, *STATUS_COLUMNS)
 BOOL_COLUMNS = frozenset({"folds_in_image"})
 FLOAT_COLUMNS = LENS_FLOAT_COLUMNS | set(COEFFICIENTS) | {"r_corner", "r_fold_red", "r_fold_blue"}
 
+#: The columns of the tables of folding entries (terminal and report).
+FOLDING_HEADER = ("r_fold_red", "r_fold_blue", "r_corner", "maker", "lens", "focal", "where")
+
 #: What each column means, for --help and docs/vignetting.md.
 COLUMN_HELP = {
     "r_corner": "radius of the image judged, Hugin units: hypot(aspect, 1), "
@@ -166,6 +169,19 @@ class TCAAudit(CalibrationAudit):
         rows = [i for i, ok in enumerate(self.audited) if ok and folds[i]]
         return sorted(rows, key=lambda i: (ratio[i], self.entries[i].file, self.entries[i].line))
 
+    def folding_row(self, index: int) -> list[str]:
+        """One entry's texts in the tables of folding entries (:data:`FOLDING_HEADER`)."""
+        m, entry = self.metrics, self.entries[index]
+        return [
+            f"{m['r_fold_red'][index]:.4g}",
+            f"{m['r_fold_blue'][index]:.4g}",
+            f"{m['r_corner'][index]:.4g}",
+            entry.maker,
+            entry.lens,
+            f"{entry.focal:g}",
+            f"{entry.file}:{entry.line}",
+        ]
+
     def nearest(self) -> int | None:
         """Index of the audited entry whose fold is nearest its image (None: none folds)."""
         ratio = self.ratios()
@@ -215,21 +231,9 @@ class TCAAudit(CalibrationAudit):
             )
         folding = self.folding()
         if folding:
-            m = self.metrics
             out += text_table(
-                ["r_fold_red", "r_fold_blue", "r_corner", "maker", "lens", "focal", "where"],
-                [
-                    [
-                        f"{m['r_fold_red'][i]:.4g}",
-                        f"{m['r_fold_blue'][i]:.4g}",
-                        f"{m['r_corner'][i]:.4g}",
-                        self.entries[i].maker,
-                        self.entries[i].lens,
-                        f"{self.entries[i].focal:g}",
-                        f"{self.entries[i].file}:{self.entries[i].line}",
-                    ]
-                    for i in folding
-                ],
+                list(FOLDING_HEADER),
+                list(map(self.folding_row, folding)),
                 right=[True, True, True, False, False, True, False],
             )
         return out + self.problem_lines()

@@ -284,6 +284,22 @@ class VignettingAudit(CalibrationAudit):
         flagged.sort(key=lambda i: (c_min[i], self.entries[i].file, self.entries[i].line))
         return flagged[:limit]
 
+    def worst_cells(self, index: int) -> dict[str, str]:
+        """One entry's texts in the tables of the worst entries, by column:
+        ``c_min r_zero r_min maker lens focal f/ distance where``."""
+        m, entry = self.metrics, self.entries[index]
+        return {
+            "c_min": f"{m['c_min'][index]:.3g}",
+            "r_zero": f"{m['r_zero'][index]:.3f}",
+            "r_min": f"{m['r_min'][index]:.3f}",
+            "maker": entry.maker,
+            "lens": entry.lens,
+            "focal": f"{entry.focal:g}",
+            "f/": f"{entry.aperture:g}",
+            "distance": f"{entry.distance:g}",
+            "where": f"{entry.file}:{entry.line}",
+        }
+
     def summary(self) -> dict[str, Any]:
         summary = super().summary()
         audited = np.array(self.audited, dtype=bool)
@@ -330,23 +346,11 @@ class VignettingAudit(CalibrationAudit):
         out.append("")
         out.append(f"Entries where C falls below 0.1 inside the image: {len(worst)}")
         if worst:
-            m = self.metrics
             shown = worst[:WORST_SHOWN]
+            header = ["c_min", "r_zero", "maker", "lens", "focal", "f/", "distance", "where"]
             out += text_table(
-                ["c_min", "r_zero", "maker", "lens", "focal", "f/", "distance", "where"],
-                [
-                    [
-                        f"{m['c_min'][i]:.3g}",
-                        f"{m['r_zero'][i]:.3f}",
-                        self.entries[i].maker,
-                        self.entries[i].lens,
-                        f"{self.entries[i].focal:g}",
-                        f"{self.entries[i].aperture:g}",
-                        f"{self.entries[i].distance:g}",
-                        f"{self.entries[i].file}:{self.entries[i].line}",
-                    ]
-                    for i in shown
-                ],
+                header,
+                [[cells[h] for h in header] for cells in map(self.worst_cells, shown)],
                 right=[True, True, False, False, True, True, True, False],
             )
             if len(worst) > len(shown):

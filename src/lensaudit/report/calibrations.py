@@ -96,33 +96,16 @@ def _worst(vignetting_audit: VignettingAudit) -> str:
     worst = vignetting_audit.worst()
     if not worst:
         return '<p id="vignetting-worst">No vignetting entry falls below 0.1 inside its image.</p>'
-    m = vignetting_audit.metrics
-    rows = []
-    for index in worst[:WORST_SHOWN]:
-        entry = vignetting_audit.entries[index]
-        rows.append(
-            [
-                f"{m['c_min'][index]:.3g}",
-                f"{m['r_zero'][index]:.3f}",
-                f"{m['r_min'][index]:.3f}",
-                entry.maker,
-                entry.lens,
-                f"{entry.focal:g}",
-                f"{entry.aperture:g}",
-                f"{entry.distance:g}",
-                f"{entry.file}:{entry.line}",
-            ]
-        )
+    header = ["c_min", "r_zero", "r_min", "maker", "lens", "focal", "f/", "distance", "where"]
+    rows = [
+        [cells[h] for h in header]
+        for cells in map(vignetting_audit.worst_cells, worst[:WORST_SHOWN])
+    ]
     more = len(worst) - len(rows)
     caption = f"The {len(rows)} lowest minima of C inside the image" + (
         f" ({more} more in vignetting.csv)" if more else ""
     )
-    return _rows_table(
-        "vignetting-worst",
-        caption,
-        ["c_min", "r_zero", "r_min", "maker", "lens", "focal", "f/", "distance", "where"],
-        rows,
-    )
+    return _rows_table("vignetting-worst", caption, header, rows)
 
 
 def _tca_folding(tca_audit: TCAAudit) -> str:
@@ -132,24 +115,13 @@ def _tca_folding(tca_audit: TCAAudit) -> str:
             '<p id="tca-folding">No TCA entry folds inside its image: every channel\'s '
             "r_d increases up to the image corner (or circle).</p>"
         )
-    m = tca_audit.metrics
-    rows = [
-        [
-            f"{m['r_fold_red'][i]:.4g}",
-            f"{m['r_fold_blue'][i]:.4g}",
-            f"{m['r_corner'][i]:.4g}",
-            tca_audit.entries[i].maker,
-            tca_audit.entries[i].lens,
-            f"{tca_audit.entries[i].focal:g}",
-            f"{tca_audit.entries[i].file}:{tca_audit.entries[i].line}",
-        ]
-        for i in folding
-    ]
+    from ..tca import FOLDING_HEADER
+
     return _rows_table(
         "tca-folding",
         "TCA entries with a channel that folds inside the image",
-        ["r_fold_red", "r_fold_blue", "r_corner", "maker", "lens", "focal", "where"],
-        rows,
+        list(FOLDING_HEADER),
+        list(map(tca_audit.folding_row, folding)),
     )
 
 
