@@ -613,6 +613,34 @@ def test_cli_writes_the_four_outputs(repo, tmp_path):
     assert b"<svg" in (out / "trend.svg").read_bytes()[:500]
 
 
+def test_cli_run_again_writes_the_same_files_without_drawing(repo, tmp_path, monkeypatch):
+    from lensaudit.cli import history as cli_history
+
+    cache = tmp_path / "cache"
+    args = ["history", str(repo.path), "--cache", str(cache), "-q", "-o"]
+    assert CliRunner().invoke(main, [*args, str(tmp_path / "first")]).exit_code == 0
+    monkeypatch.setattr(cli_history, "_draw", lambda *a: pytest.fail("drawn again"))
+    assert CliRunner().invoke(main, [*args, str(tmp_path / "second")]).exit_code == 0
+    for name in ("history.csv", "introduced.csv", "trend.png", "trend.svg"):
+        first = (tmp_path / "first" / name).read_bytes()
+        assert first and (tmp_path / "second" / name).read_bytes() == first
+
+
+def test_cli_draws_the_figures_again_when_the_history_changes(repo, tmp_path, monkeypatch):
+    from lensaudit.cli import history as cli_history
+
+    cache = tmp_path / "cache"
+    args = ["history", str(repo.path), "--cache", str(cache), "-q", "-o", str(tmp_path / "o")]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    drawn = []
+    real = cli_history._draw
+    monkeypatch.setattr(cli_history, "_draw", lambda *a: drawn.append(1) or real(*a))
+    older = ["--rev", repo.commits["c4"]]
+    assert CliRunner().invoke(main, [*args, *older]).exit_code == 0
+    assert drawn == [1]
+    assert len(list(cache.glob("history-trend-*"))) == 2  # one figure pair is kept
+
+
 def test_cli_summary_names_the_newest_revision(repo, tmp_path):
     result = CliRunner().invoke(
         main, ["history", str(repo.path), "-o", str(tmp_path), "--cache", str(tmp_path / "cache")]

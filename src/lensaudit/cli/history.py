@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -120,7 +121,7 @@ def history(
     for warning in result.warnings:
         click.echo(f"lensaudit: warning: {warning}", err=True)
 
-    written = _write_outputs(result, output_dir)
+    written = _write_outputs(result, output_dir, cache_dir)
     if not quiet:
         _print_summary(result, written)
 
@@ -148,35 +149,105 @@ class _ProgressBar:
             self.bar = None
 
 
-def _write_outputs(result, output_dir: Path) -> list[Path]:
-    from ..history import trend_figure
+def _write_outputs(result, output_dir: Path, cache_dir: Path | None) -> list[Path]:
+    import io
 
     written = []
+    texts = {}
     for name, write in (
         ("history.csv", result.write_csv),
         ("introduced.csv", result.write_introduced_csv),
     ):
+        stream = io.StringIO()
+        write(stream)
+        texts[name] = stream.getvalue()
         path = output_dir / name
         try:
             with open(path, "w", encoding="utf-8", newline="") as stream:
-                write(stream)
+                stream.write(texts[name])
         except OSError as error:
             fail(f"cannot write {path}: {error.strerror or error}")
         written.append(path)
     mode = "first-parent line" if result.first_parent else "all commits"
-    figure = trend_figure(
-        result.to_dataframe(),
-        title=f"{result.path} of {result.repository.resolve().name} "
-        f"({mode}) up to {result.newest.date[:10]}",
+    title = (
+        f"{result.path} of {result.repository.resolve().name} "
+        f"({mode}) up to {result.newest.date[:10]}"
     )
-    for name in ("trend.png", "trend.svg"):
+    figures = _figures(result, title, texts["history.csv"], cache_dir)
+    for name, data in figures.items():
         path = output_dir / name
         try:
-            figure.savefig(path, dpi=150, metadata={"Date": None} if name.endswith("svg") else None)
+            path.write_bytes(data)
         except OSError as error:
             fail(f"cannot write {path}: {error.strerror or error}")
         written.append(path)
     return written
+
+
+#: Names of the figures in the cache directory: a prefix, the key, the format.
+_FIGURE_CACHE_PREFIX = "history-trend-"
+
+
+def _figures(result, title: str, history_csv: str, cache_dir: Path | None) -> dict[str, bytes]:
+    """trend.png and trend.svg: drawn, or as drawn last time for the same
+    history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
+    import and to draw, and the history of an unchanged repository is the same)."""
+    import hashlib
+    from importlib.metadata import PackageNotFoundError, version
+
+    from ..history import _fingerprint
+
+    try:
+        matplotlib_version = version("matplotlib")
+    except PackageNotFoundError:
+        matplotlib_version = ""
+    digest = hashlib.sha256(
+        "\0".join((_fingerprint(), matplotlib_version, title, history_csv)).encode()
+    ).hexdigest()[:32]
+    names = ("trend.png", "trend.svg")
+    cached = (
+        {name: cache_dir / f"{_FIGURE_CACHE_PREFIX}{digest}{Path(name).suffix}" for name in names}
+        if cache_dir is not None
+        else {}
+    )
+    if cached:
+        try:
+            return {name: cached[name].read_bytes() for name in names}
+        except OSError:
+            pass
+    figures = _draw(result, title)
+    if cached:
+        try:
+            cache_dir.mkdir(parents=True, exist_ok=True)
+            for stale in cache_dir.glob(f"{_FIGURE_CACHE_PREFIX}*"):
+                stale.unlink(missing_ok=True)
+            for name in names:
+                temporary = cached[name].with_name(cached[name].name + f".{os.getpid()}.tmp")
+                temporary.write_bytes(figures[name])
+                temporary.replace(cached[name])
+        except OSError:
+            pass  # the figures are written to the output directory all the same
+    return figures
+
+
+def _draw(result, title: str) -> dict[str, bytes]:
+    import io
+
+    from ..history import trend_figure
+
+    figure = trend_figure(result.to_dataframe(), title=title)
+    figures = {}
+    for name in ("trend.png", "trend.svg"):
+        stream = io.BytesIO()
+        svg = name.endswith("svg")
+        figure.savefig(
+            stream,
+            format="svg" if svg else "png",
+            dpi=150,
+            metadata={"Date": None} if svg else None,
+        )
+        figures[name] = stream.getvalue()
+    return figures
 
 
 def _print_summary(result, written: list[Path]) -> None:
