@@ -334,7 +334,14 @@ def test_scan_and_check_never_crash_and_account_for_every_distortion(mutated):
             assert checked["entries"] == len(well_formed) and checked["error"] == ""
             assert not any(f["code"] == "xml-error" for f in findings)
             not_audited = Counter(r["line"] for r in records if r["status"] != "ok")
-            reported = Counter(f["line"] for f in findings if f["code"] in INPUT_CODES)
+            # Findings of <vignetting> and <tca> elements name their element.
+            reported = Counter(
+                f["line"]
+                for f in findings
+                if f["code"] in INPUT_CODES
+                and "<vignetting>" not in f["message"]
+                and "<tca>" not in f["message"]
+            )
             assert reported == not_audited
         else:
             assert checked["entries"] == len(recovered_distortion_lines(data))
