@@ -48,16 +48,39 @@ def compile_bytecode() -> None:
     compileall.compile_dir(Path(lensaudit.__file__).parent, quiet=1)
 
 
+# A small process starts each measured run and reports it: Linux carries a
+# process's peak resident size over into the children it forks (and across
+# their exec), so runs forked from this process, which holds the solver
+# section's arrays, would all report this process's peak instead of theirs.
+_LAUNCHER = (
+    "import os, subprocess, sys, time\n"
+    "start = time.perf_counter()\n"
+    "child = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL)\n"
+    "_, status, usage = os.wait4(child.pid, 0)\n"
+    "wall = time.perf_counter() - start\n"
+    "print(wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,"
+    " os.waitstatus_to_exitcode(status))\n"
+)
+
+
 def measure(command: list[str], env: dict[str, str]) -> tuple[float, float, float]:
     """Wall seconds, CPU seconds (with waited-for children) and peak MB of one run."""
-    start = time.perf_counter()
-    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    if process.returncode != 0:
-        raise subprocess.CalledProcessError(process.returncode, command)
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+    report = subprocess.run(
+        [sys.executable, "-c", _LAUNCHER, *command],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    wall, cpu, peak, returncode = (
+        float(report[0]),
+        float(report[1]),
+        float(report[2]),
+        int(report[3]),
+    )
+    if returncode != 0:
+        raise subprocess.CalledProcessError(returncode, command)
+    return wall, cpu, peak
 
 
 def in_process(repeats: int, warm_cache: str) -> dict[str, float]:
