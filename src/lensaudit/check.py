@@ -57,7 +57,6 @@ import math
 import os
 import re
 import stat
-import subprocess
 from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -66,6 +65,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import calibrations, database, loader
+from . import git as gitlayer
 from .loader import LoadError
 from .metrics import is_circular_fisheye
 
@@ -371,36 +371,13 @@ def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> 
     return sources_from_git(paths, baseline)
 
 
-_GIT_ENVIRONMENT = {
-    "GIT_OPTIONAL_LOCKS": "0",
-    "GIT_TERMINAL_PROMPT": "0",
-    "GIT_LITERAL_PATHSPECS": "1",
-    "LC_ALL": "C",
-}
-
-
-class _GitFailed(Exception):
-    pass
-
-
-def _git(arguments: list[str], cwd: Path, stdin: bytes | None = None) -> bytes:
+def _git_call(call, *arguments):
+    """``call(*arguments)`` of :mod:`lensaudit.git`; git that cannot run at all
+    is a :class:`CheckError`."""
     try:
-        completed = subprocess.run(
-            ["git", *arguments],
-            cwd=cwd,
-            input=stdin,
-            capture_output=True,
-            check=False,
-            env={**os.environ, **_GIT_ENVIRONMENT},
-        )
-    except OSError as error:
-        raise CheckError(
-            f"cannot run git to read the baseline: {error.strerror or error}"
-        ) from None
-    if completed.returncode != 0:
-        lines = completed.stderr.decode("utf-8", "replace").strip().splitlines()
-        raise _GitFailed(lines[-1] if lines else f"git {arguments[0]} failed")
-    return completed.stdout
+        return call(*arguments)
+    except gitlayer.GitUnavailable as error:
+        raise CheckError(f"cannot run git to read the baseline: {error}") from None
 
 
 def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> list[Source]:
@@ -414,57 +391,41 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
     for given in map(Path, paths):
         directory = given if given.is_dir() else given.parent
         try:
-            top = Path(os.fsdecode(_git(["rev-parse", "--show-toplevel"], directory).strip()))
-        except _GitFailed:
+            top = _git_call(gitlayer.top_level, directory)
+        except gitlayer.GitError:
             raise CheckError(
                 f"--baseline {revision}: not an existing directory, and "
                 f"{given} is not inside a git repository"
             ) from None
         try:
-            commit = (
-                _git(
-                    [
-                        "rev-parse",
-                        "--verify",
-                        "--quiet",
-                        "--end-of-options",
-                        f"{revision}^{{commit}}",
-                    ],
-                    top,
-                )
-                .decode()
-                .strip()
-            )
-        except _GitFailed:
+            commit = _git_call(gitlayer.resolve_commit, top, revision)
+        except gitlayer.GitError:
             raise CheckError(
                 f"--baseline {revision}: not an existing directory, nor a "
                 f"revision of the git repository at {top}"
             ) from None
         relative = Path(os.path.relpath(given.resolve(), top.resolve())).as_posix()
         if given.is_dir():
-            spec = [] if relative == "." else ["--", relative + "/"]
+            spec = [] if relative == "." else [relative + "/"]
         else:
-            spec = ["--", relative]
+            spec = [relative]
         try:
-            listing = _git(["ls-tree", "-z", "--full-tree", commit, *spec], top)
-        except _GitFailed as error:
+            listing = _git_call(gitlayer.list_tree, top, commit, spec)
+        except gitlayer.GitError as error:
             raise CheckError(f"--baseline {revision}: cannot list {given}: {error}") from None
         blobs = []
-        for record in listing.split(b"\0"):
-            meta, _, path = record.partition(b"\t")
-            fields = meta.split()
-            if len(fields) != 3 or fields[1] != b"blob" or fields[0] not in (b"100644", b"100755"):
+        for item in listing:
+            if item.type != "blob" or item.mode not in ("100644", "100755"):
                 continue
-            repository_path = os.fsdecode(path)
-            filename = repository_path.rsplit("/", 1)[-1]
+            filename = item.path.rsplit("/", 1)[-1]
             if given.is_dir() and not filename.lower().endswith(".xml"):
                 continue
             name = filename if given.is_dir() else str(given)
-            blobs.append((name, fields[2], repository_path))
+            blobs.append((name, item.oid, item.path))
         blobs.sort()
         try:
-            contents = _cat_file([oid for _, oid, _ in blobs], top)
-        except _GitFailed as error:
+            contents = _cat_file([oid.encode() for _, oid, _ in blobs], top)
+        except gitlayer.GitError as error:
             raise CheckError(f"--baseline {revision}: cannot read {given}: {error}") from None
         for (name, _, repository_path), data in zip(blobs, contents, strict=True):
             if data is None:
@@ -475,24 +436,13 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
 
 
 def _cat_file(objects: list[bytes], repository: Path) -> list[bytes | None]:
-    """Contents of the given objects (ids or ``rev:path``), through one
-    ``git cat-file --batch``; None for an object that does not exist."""
-    if not objects:
-        return []
-    output = _git(["cat-file", "--batch"], repository, b"".join(o + b"\n" for o in objects))
-    contents: list[bytes | None] = []
-    position = 0
-    for _ in objects:
-        end = output.index(b"\n", position)
-        header = output[position:end].split()
-        if len(header) == 3 and header[1] in (b"blob", b"tree", b"commit", b"tag"):
-            size = int(header[2])
-            contents.append(output[end + 1 : end + 1 + size] if header[1] == b"blob" else None)
-            position = end + 1 + size + 1
-        else:  # "<object> missing" or "<object> ambiguous": no content follows
-            contents.append(None)
-            position = end + 1
-    return contents
+    """Contents of the given blobs (ids or ``rev:path``), through one
+    ``git cat-file --batch``; None for an object that does not exist or is
+    not a blob."""
+    return [
+        answer[2] if answer is not None and answer[1] == "blob" else None
+        for answer in _git_call(lambda: list(gitlayer.objects(repository, objects)))
+    ]
 
 
 def _last_readable(source: Source) -> tuple[Source, str] | None:
@@ -504,20 +454,11 @@ def _last_readable(source: Source) -> tuple[Source, str] | None:
     if origin is None:
         return None
     try:
-        log = _git(
-            [
-                "log",
-                f"--max-count={HISTORY_DEPTH}",
-                "--format=%H",
-                origin.commit,
-                "--",
-                origin.path,
-            ],
-            origin.repository,
+        commits = _git_call(
+            gitlayer.log, origin.repository, origin.commit, origin.path, HISTORY_DEPTH
         )
-        commits = log.decode("ascii").split()
         contents = _cat_file([f"{c}:{origin.path}".encode() for c in commits], origin.repository)
-    except (_GitFailed, UnicodeDecodeError):
+    except (gitlayer.GitError, UnicodeDecodeError):
         return None
     tried: set[bytes] = {source.data or b""}
     for commit, data in zip(commits, contents, strict=True):

@@ -31,8 +31,6 @@ import marshal
 import os
 import re
 import sqlite3
-import subprocess
-import threading
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
@@ -43,6 +41,7 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, TextIO
 
 from . import __version__, loader
+from . import git as gitlayer
 from .columns import COLUMNS, FLOAT_COLUMNS
 from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
 
@@ -110,9 +109,6 @@ _FLOAT_INTRODUCED = FLOAT_COLUMNS & frozenset(INTRODUCED_COLUMNS)
 
 # Index into a history's commits meaning "already there before the first commit examined".
 _BEFORE = -1
-
-# Plumbing only, never a lock or an index refresh: the repository stays as it is.
-_GIT_ENVIRONMENT = {"GIT_OPTIONAL_LOCKS": "0", "GIT_TERMINAL_PROMPT": "0"}
 
 
 class HistoryError(Exception):
@@ -302,14 +298,15 @@ def _write_csv(
 
 
 class _Git:
-    """Read-only access to one repository through the git command."""
+    """One repository, read through :mod:`lensaudit.git`; git's failures as
+    :class:`HistoryError`."""
 
     def __init__(self, repository: str | os.PathLike[str]) -> None:
         self.repository = Path(repository)
+        self.given = repository  # as the user wrote it, for messages
         if not self.repository.is_dir():
             problem = "not a directory" if self.repository.exists() else "no such directory"
             raise HistoryError(f"{repository}: {problem}")
-        self._environment = dict(os.environ, **_GIT_ENVIRONMENT)
         try:
             self.run("rev-parse", "--git-dir")
         except HistoryError:
@@ -317,64 +314,31 @@ class _Git:
 
     def run(self, *args: str) -> str:
         """Standard output of ``git ARGS``; HistoryError with git's message on failure."""
-        command = ["git", "-C", str(self.repository), "-c", "log.showSignature=false", *args]
         try:
-            done = subprocess.run(command, capture_output=True, env=self._environment, check=False)
-        except OSError as error:
-            raise HistoryError(f"cannot run git: {error.strerror or error}") from None
-        if done.returncode:
-            message = done.stderr.decode("utf-8", "replace").strip().splitlines()
-            raise HistoryError(message[-1] if message else f"git {args[0]} failed")
-        return done.stdout.decode("utf-8", "replace")
+            return gitlayer.run(self.repository, *args).decode("utf-8", "replace")
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(f"cannot run git: {error}") from None
+        except gitlayer.GitError as error:
+            raise HistoryError(str(error)) from None
+
+    def resolve_commit(self, revision: str) -> str:
+        """The full id of the commit ``revision`` names; HistoryError if none."""
+        try:
+            return gitlayer.resolve_commit(self.repository, revision)
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(f"cannot run git: {error}") from None
+        except gitlayer.GitError:
+            raise HistoryError(f"{revision!r} is not a commit of {self.given}") from None
 
     def objects(self, names: Sequence[str]) -> Iterator[tuple[str, str, bytes] | None]:
-        """(object id, type, content) for each name (``<rev>:<path>`` or an id), or None.
-
-        One ``git cat-file --batch`` process answers all of them; a thread
-        writes the requests while the answers are read, so neither side waits.
-        """
-        if not names:
-            return
+        """(object id, type, content) for each name (``<rev>:<path>`` or an id),
+        or None, through one ``git cat-file --batch`` (see :func:`lensaudit.git.objects`)."""
         try:
-            process = subprocess.Popen(
-                ["git", "-C", str(self.repository), "cat-file", "--batch"],
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.DEVNULL,
-                env=self._environment,
-            )
-        except OSError as error:
-            raise HistoryError(f"cannot run git: {error.strerror or error}") from None
-        assert process.stdin is not None and process.stdout is not None
-        requests = b"".join(name.encode("utf-8", "surrogateescape") + b"\n" for name in names)
-
-        def feed() -> None:
-            try:
-                process.stdin.write(requests)
-                process.stdin.close()
-            except OSError:
-                pass  # git stopped early; the reader reports it
-
-        feeder = threading.Thread(target=feed, daemon=True)
-        feeder.start()
-        answers = process.stdout
-        try:
-            for _ in names:
-                header = answers.readline()
-                if not header:
-                    raise HistoryError("git cat-file stopped before answering every request")
-                parts = header.split()
-                if len(parts) != 3:  # "<name> missing" or "<name> ambiguous"
-                    yield None
-                    continue
-                data = answers.read(int(parts[2]))
-                answers.read(1)
-                yield parts[0].decode(), parts[1].decode(), data
-        finally:
-            process.kill()
-            feeder.join()
-            answers.close()
-            process.wait()
+            yield from gitlayer.objects(self.repository, names)
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(f"cannot run git: {error}") from None
+        except gitlayer.GitError as error:
+            raise HistoryError(str(error)) from None
 
 
 def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
@@ -1048,12 +1012,7 @@ def audit_history(
     started = time.perf_counter()
     db_path = _normalized_path(path)
     git = _Git(repository)
-    try:
-        tip = git.run(
-            "rev-parse", "--verify", "--quiet", "--end-of-options", f"{revision}^{{commit}}"
-        ).strip()
-    except HistoryError:
-        raise HistoryError(f"{revision!r} is not a commit of {repository}") from None
+    tip = git.resolve_commit(revision)
     filters = [f"--since={d}" for d in [_git_date(since, end_of_day=False)] if d]
     filters += [f"--until={d}" for d in [_git_date(until, end_of_day=True)] if d]
     warnings: list[str] = []
@@ -1284,12 +1243,7 @@ def audit_revision(
 
     db_path = _normalized_path(path)
     git = _Git(repository)
-    try:
-        commit = git.run(
-            "rev-parse", "--verify", "--quiet", "--end-of-options", f"{revision}^{{commit}}"
-        ).strip()
-    except HistoryError:
-        raise HistoryError(f"{revision!r} is not a commit of {repository}") from None
+    commit = git.resolve_commit(revision)
     maps, present = _file_maps(git, [commit], db_path, len(commit) // 2)
     files = maps[commit]
     if not files:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import os
-import subprocess
 from pathlib import Path
 
 import click
@@ -141,15 +140,10 @@ def _repository_roots(paths: tuple[Path, ...]) -> list[Path]:
 
 
 def _git_top_level(directory: Path) -> Path | None:
+    from ..git import GitError, GitUnavailable, top_level
+
     try:
-        completed = subprocess.run(
-            ["git", "-C", os.fspath(directory), "rev-parse", "--show-toplevel"],
-            capture_output=True,
-            check=False,
-            env={**os.environ, "GIT_OPTIONAL_LOCKS": "0"},
-        )
-    except OSError:
+        top = top_level(directory)
+    except (GitError, GitUnavailable):
         return None
-    if completed.returncode == 0 and completed.stdout.strip():
-        return Path(os.fsdecode(completed.stdout.strip()))
-    return None
+    return top if top.parts else None
