@@ -549,10 +549,9 @@ def _parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> _Pieces:
     well-formed and its entries are those of its pieces in order, since an
     entry's context comes from its own ``<lens>``. ``seen`` maps the digests
     of the pieces this process has parsed to whether they parsed. A file
-    that does not qualify (not well-formed, namespaces, a DTD, an encoding
-    other than UTF-8, declarations in its document type, anything outside
-    the pieces holding entries) is read
-    whole, as the loader reads it.
+    that does not qualify (not well-formed, namespaces, declarations in its
+    document type, an encoding other than UTF-8, entries outside the pieces)
+    is read whole, as the loader reads it.
     """
     from lxml import etree
 
