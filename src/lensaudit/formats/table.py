@@ -113,6 +113,12 @@ def lines(audit: Audit) -> list[str]:
             out.append(
                 f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"
             )
+    out.append("")
+    out.append(
+        "Next: every entry with its numbers, `lensaudit scan --format csv`; "
+        + ("refit the folds, `lensaudit fix`; " if folding else "")
+        + "a gate for database changes, `lensaudit check`."
+    )
     return out
 
 
