@@ -556,7 +556,7 @@ def _read(source: Source) -> _File:
         problem = Finding(SEVERITY_ERROR, XML_ERROR, display, line, column, message)
         return _File(source, entries, problem, text)
     if b"xmlns" in data:
-        loader._use_local_names(root)  # as the loader reads it: liblensfun ignores namespaces
+        loader.use_local_names(root)  # as the loader reads it: liblensfun ignores namespaces
     if root.tag != loader.DATABASE_ROOT:
         entries, load_error = loader.read_bytes(data, display)
         line = entries[0].line if entries else 1
@@ -862,7 +862,7 @@ def _fold_finding(
             FOLD_IN_IMAGE,
             entry,
             f"the model folds back inside its own image: {where}; "
-            f"undistortion mirrors pixels beyond that radius",
+            f"undistortion mirrors pixels beyond that radius; {_fix_suggestion(entry)}",
         )
     if m.r_normalized < margin:
         return _entry_finding(
@@ -879,6 +879,16 @@ def _fold_finding(
             f"the model folds back outside its image: {where}",
         )
     return None
+
+
+def _fix_suggestion(entry: loader.DistortionEntry) -> str:
+    """The ``lensaudit fix`` command that refits this entry, on the same database.
+
+    The lens name goes in double quotes (single-quoted text is what messages
+    shorten), with the characters a POSIX shell expands there escaped.
+    """
+    lens = re.sub(r'([\\"$`])', r"\\\1", entry.lens)
+    return f'`lensaudit fix --lens "{lens}" --focal {entry.focal:g}` refits it'
 
 
 def _calibration_findings(read: Sequence[_File], verbose: bool) -> Iterable[tuple[int, Identified]]:

@@ -889,7 +889,3 @@ def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = N
         result.files.append(SourceFile(name, path, len(entries), error))
         result.entries.extend(entries)
     return result
-
-
-# Old private names, still used by check.py
-_use_local_names = use_local_names
