@@ -77,3 +77,30 @@ def liblensfun_lenses() -> dict:
         key = (lens.maker.strip(), lens.model.strip(), float(np.float32(lens.crop_factor)))
         found.setdefault(key, lens)
     return found
+
+
+#: The Lensfun database's git history, beside the repository (absent in a user's clone).
+HISTORY_BUNDLE = (
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "lensfun-db-history.bundle"
+)
+
+
+@pytest.fixture(scope="session")
+def lensfun_head(tmp_path_factory) -> Path:
+    """data/db at the last commit of Lensfun's history bundle; skips without the bundle."""
+    import subprocess
+
+    if not HISTORY_BUNDLE.is_file():
+        pytest.skip(
+            f"no Lensfun history bundle at {HISTORY_BUNDLE} (../shared/data from the repository)"
+        )
+    clone = tmp_path_factory.mktemp("head") / "lensfun"
+    try:
+        subprocess.run(
+            ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)],
+            check=True,
+            capture_output=True,
+        )
+    except (OSError, subprocess.CalledProcessError) as error:
+        pytest.skip(f"cannot clone the Lensfun history bundle: {error}")
+    return clone / "data" / "db"

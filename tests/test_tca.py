@@ -9,9 +9,7 @@ and for whole databases numpy dense sampling with a proven bound.
 from __future__ import annotations
 
 import math
-import subprocess
 import warnings
-from pathlib import Path
 
 import mpmath
 import numpy as np
@@ -25,8 +23,6 @@ from conftest import lens_xml
 from lensaudit import calibrations, tca
 
 R = sympy.Symbol("r")
-ROOT = Path(__file__).resolve().parents[1]
-BUNDLE = ROOT.parent / "shared" / "data" / "lensfun-db-history.bundle"
 
 
 # --- the reference ---------------------------------------------------------
@@ -272,21 +268,6 @@ def test_bundled_r_fold_values_match_mpmath(bundled_db):
                 want = float(positive[0]) if positive and mv > 0 else math.inf
             got = audit.metrics[f"r_fold_{channel}"][index]
             assert got == pytest.approx(want, rel=1e-12), f"{entry.file}:{entry.line} {channel}"
-
-
-@pytest.fixture(scope="module")
-def lensfun_head(tmp_path_factory) -> Path:
-    """The database of the last commit of Lensfun's history bundle."""
-    if not BUNDLE.is_file():
-        pytest.skip(f"no Lensfun history bundle at {BUNDLE} (../shared/data from the repository)")
-    clone = tmp_path_factory.mktemp("head") / "lensfun"
-    try:
-        subprocess.run(
-            ["git", "clone", "--quiet", str(BUNDLE), str(clone)], check=True, capture_output=True
-        )
-    except (OSError, subprocess.CalledProcessError) as error:
-        pytest.skip(f"cannot clone the Lensfun history bundle: {error}")
-    return clone / "data" / "db"
 
 
 def test_no_tca_entry_of_lensfun_head_folds_by_an_independent_computation(lensfun_head):

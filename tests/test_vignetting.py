@@ -12,7 +12,6 @@ import io
 import math
 import os
 import re
-import subprocess
 import warnings
 from decimal import Decimal
 from pathlib import Path
@@ -30,8 +29,6 @@ from lensaudit import calibrations, vignetting
 from lensaudit.loader import LoadError
 
 W = sympy.Symbol("w")
-ROOT = Path(__file__).resolve().parents[1]
-BUNDLE = ROOT.parent / "shared" / "data" / "lensfun-db-history.bundle"
 
 
 # --- the reference ---------------------------------------------------------
@@ -445,21 +442,6 @@ def assert_database_matches(database: Path) -> dict:
 def test_bundled_database_counts_match_an_independent_computation(bundled_db):
     counts = assert_database_matches(bundled_db)
     assert counts["zero_in_image"] > 50
-
-
-@pytest.fixture(scope="module")
-def lensfun_head(tmp_path_factory) -> Path:
-    """The database of the last commit of Lensfun's history bundle."""
-    if not BUNDLE.is_file():
-        pytest.skip(f"no Lensfun history bundle at {BUNDLE} (../shared/data from the repository)")
-    clone = tmp_path_factory.mktemp("head") / "lensfun"
-    try:
-        subprocess.run(
-            ["git", "clone", "--quiet", str(BUNDLE), str(clone)], check=True, capture_output=True
-        )
-    except (OSError, subprocess.CalledProcessError) as error:
-        pytest.skip(f"cannot clone the Lensfun history bundle: {error}")
-    return clone / "data" / "db"
 
 
 def test_lensfun_head_counts_match_an_independent_computation(lensfun_head):
