@@ -40,6 +40,8 @@ def report(
     \b
     DIR receives:
       entries.csv            every entry with its metrics (as `scan -f csv`)
+      vignetting.csv         every vignetting entry (as `scan --kind vignetting -f csv`)
+      tca.csv                every TCA entry (as `scan --kind tca -f csv`)
       summary.json           counts, provenance, the folding entries
       table1.md, table1.csv  the paper's Table 1: finite / infinite r_max per model
       table2.md, table2.csv  the paper's Table 2: tail sign of the finite ones
