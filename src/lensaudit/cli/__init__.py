@@ -15,7 +15,7 @@ from .. import __version__
 
 #: Subcommand name -> (module under lensaudit.cli, one-line help).
 SUBCOMMANDS = {
-    "scan": ("scan", "Compute r_max for every distortion entry of a Lensfun database."),
+    "scan": ("scan", "Compute r_max for every distortion entry (or audit vignetting, TCA)."),
     "report": ("report", "Write tables, figures and a self-contained HTML report."),
     "plot": ("plot", "Plot one entry's D(r), its undistortion, or r_max maps."),
     "check": ("check", "Fail when a database (or a change to it) has models that fold."),

@@ -38,16 +38,20 @@ def scan(
 ) -> None:
     """Compute r_max for every distortion entry of a Lensfun database.
 
-    PATH is a database directory (every *.xml in it) or XML files. Without
-    PATH, the database bundled with lensfunpy is audited.
+    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    (its data/db) or XML files. Without PATH, the database of the Lensfun
+    checkout around the working directory is audited, else the one bundled
+    with lensfunpy. --kind vignetting or tca audits those models instead
+    (see docs/vignetting.md).
 
     \b
     Per entry (CSV/JSON columns):
       r_max         first local maximum of D(r), undistorted, in Hugin units
                     (1 = half the short side of the calibration image)
       d_max         D(r_max), the largest distorted radius the model reaches
-      r_normalized  d_max / image corner hypot(aspect, 1); below 1 the model
-                    folds inside its own image
+      r_normalized  d_max / image corner hypot(aspect, 1) (1 for a circular
+                    fisheye's image circle); below 1 the model folds inside
+                    its own image
       *_paper       the same with the paper's mixed-unit corner (for comparison)
 
     \b
