@@ -311,14 +311,15 @@ def test_directory_without_xml_exits_2_with_a_clear_message(tmp_path):
 def test_unreadable_file_is_a_finding_and_the_others_are_checked(write_xml, monkeypatch):
     write_xml(lens_xml(FOLDING), "a.xml")
     path = write_xml(lens_xml(FOLDING), "b.xml")
-    original = Path.read_bytes
+    original = os.open
 
-    def read_bytes(self):
-        if self.name == "b.xml":
+    def open_file(file, *arguments, **keywords):
+        # The lowest level a file is opened at, whoever reads it.
+        if Path(file).name == "b.xml":
             raise PermissionError(13, "Permission denied")
-        return original(self)
+        return original(file, *arguments, **keywords)
 
-    monkeypatch.setattr(Path, "read_bytes", read_bytes)
+    monkeypatch.setattr(os, "open", open_file)
     result = check(path.parent)
     assert [(f.code, Path(f.file).name) for f in result.findings] == [
         ("fold-in-image", "a.xml"),
@@ -329,11 +330,14 @@ def test_unreadable_file_is_a_finding_and_the_others_are_checked(write_xml, monk
 
 def test_no_readable_file_at_all_exits_2(write_xml, monkeypatch):
     path = write_xml(lens_xml(FOLDING))
+    original = os.open
 
-    def read_bytes(self):
-        raise PermissionError(13, "Permission denied")
+    def open_file(file, *arguments, **keywords):
+        if Path(file).name == path.name:
+            raise PermissionError(13, "Permission denied")
+        return original(file, *arguments, **keywords)
 
-    monkeypatch.setattr(Path, "read_bytes", read_bytes)
+    monkeypatch.setattr(os, "open", open_file)
     result = CliRunner().invoke(main, ["check", str(path)])
     assert result.exit_code == 2
     assert result.output.startswith("lensaudit: error: no file could be read:")

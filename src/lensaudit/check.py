@@ -56,7 +56,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import stat
 from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -312,16 +311,6 @@ def check(
 # Sources: files on disk, or blobs of a git revision
 
 
-def _read_regular_file(path: Path) -> bytes:
-    """The bytes of a regular file; OSError for anything else (a FIFO would block)."""
-    info = path.stat()
-    if not stat.S_ISREG(info.st_mode):
-        raise OSError(0, "not a regular file")
-    if info.st_size > loader.MAX_FILE_BYTES:
-        raise OSError(0, f"larger than {loader.MAX_FILE_BYTES >> 20} MiB, not a database file")
-    return path.read_bytes()
-
-
 def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
     """The XML files that directories and files designate, read into memory.
 
@@ -356,7 +345,7 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
                 continue
             seen.add(resolved)
             try:
-                data, error = _read_regular_file(file), ""
+                data, error = loader.read_regular_file(file), ""
             except OSError as os_error:
                 data, error = None, f"cannot read file: {os_error.strerror or os_error}"
             sources.append(Source(name, display, resolved, data, error))

@@ -822,36 +822,6 @@ def load(
     return load_files(expand(paths), cache)
 
 
-def load_files_in_background(
-    targets: list[tuple[Path, str]], cache: EntryCache | None = None
-) -> Callable[[], LoadResult]:
-    """Start :func:`load_files` in a thread; call what is returned for its result.
-
-    libxml2 parses without holding the GIL, so the caller can meanwhile do
-    other work (import numpy, say). Exceptions are raised by the call.
-    """
-    import threading
-
-    outcome: dict[str, Any] = {}
-
-    def work() -> None:
-        try:
-            outcome["result"] = load_files(targets, cache)
-        except BaseException as error:  # handed to the caller, not lost in the thread
-            outcome["error"] = error
-
-    thread = threading.Thread(target=work, name="lensaudit-load", daemon=True)
-    thread.start()
-
-    def result() -> LoadResult:
-        thread.join()
-        if "error" in outcome:
-            raise outcome["error"]
-        return outcome["result"]
-
-    return result
-
-
 def read_regular_file(path: Path) -> bytes:
     """The bytes of the database file at ``path``, as :func:`load_files` reads it.
 

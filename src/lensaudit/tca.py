@@ -65,23 +65,6 @@ COLUMN_HELP = {
 }
 
 
-def channel_coefficients(
-    model: str,
-    kr: float,
-    kb: float,
-    vr: float,
-    vb: float,
-    cr: float,
-    cb: float,
-    br: float,
-    bb: float,
-) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """(v, c, b) of the red and of the blue channel: r_d = r (b r^2 + c r + v)."""
-    if model == "linear":
-        return (kr, 0.0, 0.0), (kb, 0.0, 0.0)
-    return (vr, cr, br), (vb, cb, bb)
-
-
 def r_fold(
     v: ArrayLike, c: ArrayLike, b: ArrayLike, r_corner: ArrayLike
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
