@@ -1,3 +1,3 @@
-from lensaudit.cli import main
+from lensaudit.cli import run
 
-main()
+run()
