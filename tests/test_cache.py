@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 import lensaudit.cache as cache_module
 from conftest import lens_xml
-from lensaudit import loader
+from lensaudit import loader, store
 from lensaudit.cache import ParseCache, cache_dir, pack_entries, unpack_entries
 from lensaudit.cli import main
 from lensaudit.formats import csv_format, json_format
@@ -458,7 +458,7 @@ def test_any_flipped_bytes_in_the_cache_file_give_the_uncached_audit(small_db, d
 def forge(path: Path, data: bytes, signature_format: bytes) -> None:
     """Rewrite the cache file with every r_max set to 42, signed as the documented format
     says (BLAKE2b-256 of the format, then the records) for ``signature_format``."""
-    header = len(cache_module._MAGIC) + 32
+    header = len(store.MAGIC) + 32
     records = marshal.loads(data[header:])
     for key, (digest, entries, error, metrics, name, _) in records.items():
         count = len(array("d", metrics["r_max"]))
@@ -466,7 +466,7 @@ def forge(path: Path, data: bytes, signature_format: bytes) -> None:
         records[key] = (digest, entries, error, metrics, name, {})  # no rows rendered
     body = marshal.dumps(records)
     signature = hashlib.blake2b(signature_format + body, digest_size=32).digest()
-    path.write_bytes(cache_module._MAGIC + signature + body)
+    path.write_bytes(store.MAGIC + signature + body)
 
 
 def test_a_cache_file_signed_for_this_version_is_served(small_db, cache_dir_path):

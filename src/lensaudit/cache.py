@@ -23,11 +23,12 @@ that shows it the same way.
 Where: ``$LENSAUDIT_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/lensaudit``
 (if that is an absolute path, as the XDG specification requires), else
 ``~/.cache/lensaudit``. One cache file, ``parsed-<digest>.cache``, per set of
-input files. After each write, the least recently used cache files beyond
-:data:`MAX_CACHE_FILES` files or :data:`MAX_CACHE_BYTES` bytes in total are
-removed (the one just written is kept), and so are temporary files left
-behind for more than an hour. Within a cache file, records of files not seen
-in the run that writes it are dropped.
+input files, a file of :mod:`lensaudit.store` like every cache of lensaudit
+(:func:`record_file`): after each write, the least recently used store files
+of the directory beyond :data:`MAX_CACHE_FILES` files or :data:`MAX_CACHE_BYTES`
+bytes in total are removed (the one just written is kept), and so are
+temporary files left behind for more than an hour. Within a cache file,
+records of files not seen in the run that writes it are dropped.
 
 Integrity: a cache file is a fixed header, a BLAKE2b checksum, then the
 records as :mod:`marshal` data. The checksum covers the records and the
@@ -46,10 +47,7 @@ same packed columns carry parsed files between processes
 
 from __future__ import annotations
 
-import marshal
 import os
-import stat as stat_module
-import time
 from array import array
 from dataclasses import dataclass, fields
 from itertools import islice
@@ -61,7 +59,7 @@ try:  # BLAKE2 alone: hashlib would also load OpenSSL, a few ms a warm scan does
 except ImportError:
     from hashlib import blake2b
 
-from . import __version__
+from . import __version__, store
 from .columns import METRIC_FLAG_COLUMNS, METRIC_FLOAT_COLUMNS
 from .loader import DistortionEntry
 
@@ -70,22 +68,8 @@ MAX_CACHE_FILES = 16
 #: Total size of the cache files kept, at most, in bytes (the newest is always kept).
 MAX_CACHE_BYTES = 64 * 1024 * 1024
 
-_PREFIX = "parsed-"
-_SUFFIX = ".cache"
-_TEMPORARY_SUFFIX = ".tmp"
-_ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
-_MAGIC = b"lensaudit parse cache\n"
-_CHECKSUM_SIZE = 32
+_KIND = "parsed"  # cache files are parsed-<digest>.cache (see lensaudit.store)
 _DIGEST_SIZE = 16  # of file contents: collisions by chance are out of the question
-# Opening a temporary file: it must not exist yet (nor be a link to anything).
-_CREATE_NEW = (
-    os.O_WRONLY
-    | os.O_CREAT
-    | os.O_EXCL
-    | getattr(os, "O_NOFOLLOW", 0)
-    | getattr(os, "O_CLOEXEC", 0)
-    | getattr(os, "O_BINARY", 0)
-)
 
 
 def _kind(annotation: object) -> str:
@@ -124,12 +108,6 @@ _FORMAT = (
     f"{' '.join(f'{name}:{kind}' for name, kind in _KINDS.items())} "
     f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(METRIC_FLAG_COLUMNS)} rows"
 ).encode()
-
-
-def _checksum(body: bytes | memoryview) -> bytes:
-    digest = blake2b(_FORMAT, digest_size=_CHECKSUM_SIZE)
-    digest.update(body)
-    return digest.digest()
 
 
 def content_digest(data: bytes) -> bytes:
@@ -320,33 +298,9 @@ def _valid_record(record: object) -> bool:
     )
 
 
-def _read_records(path: Path) -> dict[bytes, _Record]:
+def _read_records(file: store.RecordFile) -> dict[bytes, _Record]:
     """The records of a cache file; empty if it is missing, damaged or foreign."""
-    try:
-        # Non-blocking, and regular files only: a FIFO put here must not hang a scan.
-        handle = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError:
-        return {}
-    try:
-        status = os.fstat(handle)
-        if not stat_module.S_ISREG(status.st_mode) or status.st_size > MAX_CACHE_BYTES:
-            return {}
-        with os.fdopen(handle, "rb") as stream:
-            handle = -1
-            data = stream.read()
-    except OSError:
-        return {}
-    finally:
-        if handle != -1:
-            os.close(handle)
-    start = len(_MAGIC) + _CHECKSUM_SIZE
-    body = memoryview(data)[start:]
-    if not data.startswith(_MAGIC) or data[len(_MAGIC) : start] != _checksum(body):
-        return {}
-    try:
-        records = marshal.loads(body)
-    except (EOFError, ValueError, TypeError):
-        return {}
+    records = file.read()
     if not isinstance(records, dict):
         return {}
     return {
@@ -356,35 +310,20 @@ def _read_records(path: Path) -> dict[bytes, _Record]:
     }
 
 
-def _evict(directory: Path, keep: Path) -> None:
-    """Remove the least recently used cache files beyond the limits, and abandoned ones."""
-    now = time.time()
-    found = []
-    for candidate in directory.glob(f"{_PREFIX}*"):
-        try:
-            status = candidate.stat()
-            if candidate.name.endswith(_TEMPORARY_SUFFIX):
-                if now - status.st_mtime > _ABANDONED_SECONDS:
-                    candidate.unlink(missing_ok=True)
-                continue
-            if candidate != keep and stat_module.S_ISREG(status.st_mode):
-                found.append((status.st_mtime_ns, status.st_size, candidate))
-        except OSError:
-            continue
-    try:
-        count, total = 1, keep.stat().st_size
-    except OSError:
-        count, total = 0, 0
-    full = False
-    for _, size, candidate in sorted(found, key=lambda item: item[0], reverse=True):
-        count, total = count + 1, total + size
-        # Least recently used first out: once one does not fit, no older one is kept.
-        full = full or count > MAX_CACHE_FILES or total > MAX_CACHE_BYTES
-        if full:
-            try:
-                candidate.unlink(missing_ok=True)
-            except OSError:
-                pass
+def record_file(
+    kind: str, name: str, fingerprint: bytes, directory: Path | None = None
+) -> store.RecordFile:
+    """The store file ``<kind>-<name>.cache`` (see :class:`lensaudit.store.RecordFile`)
+    in :func:`cache_dir` by default, bounded by :data:`MAX_CACHE_FILES` and
+    :data:`MAX_CACHE_BYTES`."""
+    return store.RecordFile(
+        directory or cache_dir(),
+        kind,
+        name,
+        fingerprint,
+        max_files=MAX_CACHE_FILES,
+        max_bytes=MAX_CACHE_BYTES,
+    )
 
 
 class ParseCache:
@@ -402,6 +341,7 @@ class ParseCache:
         self._records: dict[bytes, _Record] = {}
         self._seen: set[bytes] = set()
         self._changed = False
+        self._file: store.RecordFile | None = None
         self.path: Path | None = None
         if not _PACKABLE:  # entries of a layout this module cannot store
             return
@@ -409,15 +349,11 @@ class ParseCache:
             # os.fsencode keeps file names that are not UTF-8 (surrogate escapes) as bytes.
             key = b"\0".join(sorted(map(os.fsencode, paths)))
             name = blake2b(key, digest_size=8).hexdigest()
-            self.path = (directory or cache_dir()) / f"{_PREFIX}{name}{_SUFFIX}"
+            self._file = record_file(_KIND, name, _FORMAT, directory)
         except (OSError, RuntimeError, ValueError):
             return
-        self._records = _read_records(self.path)
-        if self._records:
-            try:  # recently used: last to be evicted
-                os.utime(self.path)
-            except OSError:
-                pass
+        self.path = self._file.path
+        self._records = _read_records(self._file)
 
     def knows(self, path: Path) -> bool:
         """Whether a record of ``path`` is held (so that hashing the file may pay)."""
@@ -457,7 +393,7 @@ class ParseCache:
         ``rows`` (rendered rows by format, for file name ``name``) are added to
         those stored for the same content and name.
         """
-        if self.path is None:
+        if self._file is None:
             return
         key = os.fsencode(path)
         self._seen.add(key)
@@ -508,31 +444,10 @@ class ParseCache:
         Files not seen in this run (removed from the database) are dropped.
         """
         stale = self._records.keys() - self._seen
-        if self.path is None or not (self._changed or stale):
+        if self._file is None or not (self._changed or stale):
             return
         kept = {k: v for k, v in self._records.items() if k in self._seen}
-        temporary = None
         try:
-            body = marshal.dumps(kept)
-            if len(body) > MAX_CACHE_BYTES:  # it would be evicted, and never read
-                return
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            # A new file of a random name, as tempfile.mkstemp makes one (without
-            # importing tempfile, which would add a few milliseconds to a first scan).
-            name = self.path.parent / f"{_PREFIX}{os.urandom(8).hex()}{_TEMPORARY_SUFFIX}"
-            handle = os.open(name, _CREATE_NEW, 0o600)
-            temporary = name
-            with os.fdopen(handle, "wb") as stream:
-                stream.write(_MAGIC + _checksum(body))
-                stream.write(body)
-            os.replace(temporary, self.path)
-            temporary = None
-            _evict(self.path.parent, self.path)
+            self._file.write(kept)
         except (OSError, ValueError):
             pass
-        finally:
-            if temporary is not None:
-                try:
-                    os.unlink(temporary)
-                except OSError:
-                    pass

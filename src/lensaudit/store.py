@@ -1,0 +1,197 @@
+"""Files of records in lensaudit's cache directory: the storage under every cache.
+
+A store file is ``<kind>-<name>.cache``, with ``kind`` one of :data:`KINDS`,
+and holds one value as :mod:`marshal` data (plain values only: reading one
+cannot run code). It starts with a fixed header and a BLAKE2b-256 checksum
+of the value and of the file's fingerprint, a text naming whatever made the
+value (lensaudit's version, the layout of the records, a digest of the
+code). The checksum is verified before anything is unmarshalled: a flipped
+byte, a truncated file or a file of another fingerprint reads as no file.
+
+A file is written whole to a temporary file beside it, then renamed over
+it: a reader finds the old value or the new one, never a mixture. After each
+write, the least recently used store files of the directory (of every kind)
+beyond a number of files or a total size are removed, the one just written
+excepted, and so are temporary files left behind for more than an hour.
+Reading a file marks it as recently used.
+
+The store raises nothing for a file that cannot be read; writing raises
+OSError (the directory cannot be written) or ValueError (a value marshal
+cannot store, or larger than the size bound), for each cache to decide
+whether that is worth a word.
+"""
+
+from __future__ import annotations
+
+import marshal
+import os
+import stat as stat_module
+import time
+from pathlib import Path
+
+try:  # BLAKE2 alone: hashlib would also load OpenSSL, a few ms a warm scan does not need
+    from _blake2 import blake2b
+except ImportError:
+    from hashlib import blake2b
+
+#: The kinds of store file; eviction considers only files named after one of them.
+KINDS = ("parsed", "history")
+
+MAGIC = b"lensaudit cache\n"
+CHECKSUM_SIZE = 32
+SUFFIX = ".cache"
+_TEMPORARY_SUFFIX = ".tmp"
+_ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
+# Opening a temporary file: it must not exist yet (nor be a link to anything).
+_CREATE_NEW = (
+    os.O_WRONLY
+    | os.O_CREAT
+    | os.O_EXCL
+    | getattr(os, "O_NOFOLLOW", 0)
+    | getattr(os, "O_CLOEXEC", 0)
+    | getattr(os, "O_BINARY", 0)
+)
+
+
+def checksum(fingerprint: bytes, body: bytes | memoryview) -> bytes:
+    """The checksum a store file carries for ``body`` made under ``fingerprint``."""
+    digest = blake2b(fingerprint, digest_size=CHECKSUM_SIZE)
+    digest.update(body)
+    return digest.digest()
+
+
+class RecordFile:
+    """One store file: ``<kind>-<name>.cache`` in ``directory``, valid for ``fingerprint``.
+
+    ``max_files`` and ``max_bytes`` bound the store files of the directory
+    after a write (and a file larger than ``max_bytes`` is neither read nor
+    written).
+    """
+
+    def __init__(
+        self,
+        directory: Path,
+        kind: str,
+        name: str,
+        fingerprint: bytes,
+        *,
+        max_files: int,
+        max_bytes: int,
+    ) -> None:
+        if kind not in KINDS:
+            raise ValueError(f"unknown store kind {kind!r}")
+        self.kind = kind
+        self.path = directory / f"{kind}-{name}{SUFFIX}"
+        self.fingerprint = fingerprint
+        self.max_files = max_files
+        self.max_bytes = max_bytes
+
+    def read(self) -> object:
+        """The value stored, or None if the file is missing, damaged, of another
+        fingerprint, too large, or not a regular file."""
+        path = self.path
+        try:
+            # Non-blocking, and regular files only: a FIFO put here must not hang a run.
+            handle = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        except OSError:
+            return None
+        try:
+            status = os.fstat(handle)
+            if not stat_module.S_ISREG(status.st_mode) or status.st_size > self.max_bytes:
+                return None
+            with os.fdopen(handle, "rb") as stream:
+                handle = -1
+                data = stream.read()
+        except OSError:
+            return None
+        finally:
+            if handle != -1:
+                os.close(handle)
+        start = len(MAGIC) + CHECKSUM_SIZE
+        body = memoryview(data)[start:]
+        if not data.startswith(MAGIC) or data[len(MAGIC) : start] != checksum(
+            self.fingerprint, body
+        ):
+            return None
+        try:
+            value = marshal.loads(body)
+        except (EOFError, ValueError, TypeError):
+            return None
+        try:  # recently used: last to be evicted
+            os.utime(path)
+        except OSError:
+            pass
+        return value
+
+    def write(self, value: object) -> None:
+        """Store ``value`` (see :meth:`write_body`)."""
+        self.write_body(marshal.dumps(value))
+
+    def write_body(self, body: bytes) -> None:
+        """Store ``body``, a value as :func:`marshal.dumps` gives it, then evict.
+
+        Raises OSError when the file cannot be written, ValueError when it
+        would be larger than ``max_bytes`` (it would be evicted, never read).
+        """
+        if len(MAGIC) + CHECKSUM_SIZE + len(body) > self.max_bytes:
+            raise ValueError(f"{self.path.name} would take more than {self.max_bytes:,} bytes")
+        directory = self.path.parent
+        directory.mkdir(parents=True, exist_ok=True)
+        # A new file of a random name, as tempfile.mkstemp makes one (without
+        # importing tempfile, which would add a few milliseconds to a first scan).
+        temporary = directory / f"{self.kind}-{os.urandom(8).hex()}{_TEMPORARY_SUFFIX}"
+        handle = os.open(temporary, _CREATE_NEW, 0o600)
+        try:
+            with os.fdopen(handle, "wb") as stream:
+                stream.write(MAGIC + checksum(self.fingerprint, body))
+                stream.write(body)
+            os.replace(temporary, self.path)
+        except BaseException:
+            try:
+                os.unlink(temporary)
+            except OSError:
+                pass
+            raise
+        evict(directory, self.path, self.max_files, self.max_bytes)
+
+
+def _store_name(name: str) -> bool:
+    kind, dash, _ = name.partition("-")
+    return bool(dash) and kind in KINDS and name.endswith((SUFFIX, _TEMPORARY_SUFFIX))
+
+
+def evict(directory: Path, keep: Path, max_files: int, max_bytes: int) -> None:
+    """Remove the least recently used store files of ``directory`` beyond ``max_files``
+    files or ``max_bytes`` bytes in all (``keep`` stays and counts), and abandoned
+    temporary files."""
+    now = time.time()
+    found = []
+    try:
+        candidates = [entry for entry in os.scandir(directory) if _store_name(entry.name)]
+    except OSError:
+        return
+    for candidate in candidates:
+        try:
+            status = candidate.stat(follow_symlinks=False)
+            if candidate.name.endswith(_TEMPORARY_SUFFIX):
+                if now - status.st_mtime > _ABANDONED_SECONDS:
+                    os.unlink(candidate.path)
+                continue
+            if candidate.name != keep.name and stat_module.S_ISREG(status.st_mode):
+                found.append((status.st_mtime_ns, status.st_size, candidate.path))
+        except OSError:
+            continue
+    try:
+        count, total = 1, keep.stat().st_size
+    except OSError:
+        count, total = 0, 0
+    full = False
+    for _, size, candidate in sorted(found, key=lambda item: item[0], reverse=True):
+        count, total = count + 1, total + size
+        # Least recently used first out: once one does not fit, no older one is kept.
+        full = full or count > max_files or total > max_bytes
+        if full:
+            try:
+                os.unlink(candidate)
+            except OSError:
+                pass
