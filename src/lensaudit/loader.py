@@ -18,7 +18,7 @@ import re
 import stat
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from operator import itemgetter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -389,11 +389,25 @@ _LAYOUT = {
 }
 
 
-def _entry(element: etree._Element, name: str, context: LensContext) -> DistortionEntry:
-    """Build the record of one ``<distortion>`` element.
+#: An entry as a plain tuple: the fields of :class:`DistortionEntry` after ``file``.
+#: Reading a whole database makes thousands; tuples are what columns are made of.
+EntryRow = tuple
+#: The field names of an :data:`EntryRow`, in order.
+ROW_FIELDS = tuple(f.name for f in fields(DistortionEntry))[1:]
+
+
+def row_columns(rows: list[EntryRow]) -> dict[str, list]:
+    """Rows as columns: field name -> one value per row (``file`` left out)."""
+    if not rows:
+        return {name: [] for name in ROW_FIELDS}
+    return dict(zip(ROW_FIELDS, map(list, zip(*rows, strict=True)), strict=True))
+
+
+def _row(element: etree._Element, context: LensContext) -> EntryRow:
+    """The row of one ``<distortion>`` element (see :data:`EntryRow`).
 
     The common case, a known model with plain numbers, takes a short path;
-    anything else is examined in full by :func:`_checked_entry`.
+    anything else is examined in full by :func:`_checked_row`.
     """
     get = element.get
     model = get("model")
@@ -419,20 +433,21 @@ def _entry(element: etree._Element, name: str, context: LensContext) -> Distorti
                     else:
                         real_focal = values[1]
                     values.append(NAN)
-                    return DistortionEntry(
-                        name,
+                    return (
                         element.sourceline or 0,
                         *context.lens_fields,
-                        model,  # type: ignore[arg-type]
+                        model,
                         focal,
                         real_focal,
                         *_LAYOUT[model](values),  # type: ignore[index]
+                        STATUS_OK,
+                        "",
                     )
-    return _checked_entry(element, name, context)
+    return _checked_row(element, context)
 
 
-def _checked_entry(element: etree._Element, name: str, context: LensContext) -> DistortionEntry:
-    """The record of one ``<distortion>`` element, every problem noted."""
+def _checked_row(element: etree._Element, context: LensContext) -> EntryRow:
+    """The row of one ``<distortion>`` element, every problem noted."""
     # Without a real-focal= attribute, the <real-focal-length> of its focal length.
     required = (
         ("focal", None),
@@ -440,14 +455,13 @@ def _checked_entry(element: etree._Element, name: str, context: LensContext) -> 
     )
     model, values, problems = checked_attributes(element, required, _MODEL_DEFAULTS, context)
     status, message = status_of(problems)
-    layout = [values.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")]
-    return context.record(
-        name,
+    return (
         element.sourceline or 0,
+        *context.lens_fields,
         model,
         values["focal"],
         values["real-focal"],
-        layout,
+        *(values.get(n, NAN) for n in ("a", "b", "c", "k1", "k2")),
         status,
         message,
     )
@@ -512,8 +526,16 @@ def status_of(problems: list[tuple[str, str]]) -> tuple[str, str]:
 
 def entries_from_tree(root: etree._Element, name: str) -> Iterator[DistortionEntry]:
     """Records for every ``<distortion>`` element under ``root``, in document order."""
-    for element, context in elements_in_context(root, ("distortion",)):
-        yield _entry(element, name, context)
+    for row in rows_from_tree(root):
+        yield DistortionEntry(name, *row)
+
+
+def rows_from_tree(root: etree._Element) -> list[EntryRow]:
+    """:func:`entries_from_tree` as rows (see :data:`EntryRow`)."""
+    return [_row(element, context) for element, context in elements_in_context(root, _DISTORTION)]
+
+
+_DISTORTION = ("distortion",)
 
 
 def elements_in_context(
@@ -617,25 +639,9 @@ def marked(records: Iterable[Any], status: str, message: str) -> list[Any]:
     ]
 
 
-def _replace_status(entry: DistortionEntry, status: str, message: str) -> DistortionEntry:
-    return replace(entry, status=status, message=message)
-
-
-def _error_entry(name: str, line: int, status: str, message: str) -> DistortionEntry:
-    return DistortionEntry(
-        file=name,
-        line=line,
-        maker="",
-        lens="",
-        mounts=(),
-        type="",
-        crop_factor=NAN,
-        aspect_ratio=NAN,
-        model="",
-        focal=NAN,
-        status=status,
-        message=message,
-    )
+def _error_row(line: int, status: str, message: str) -> EntryRow:
+    """The row that stands for a whole file's problem: no lens, no model."""
+    return (line, "", "", (), "", NAN, NAN, "", NAN, NAN, NAN, NAN, NAN, NAN, NAN, status, message)
 
 
 def load_bytes(data: bytes, name: str) -> list[DistortionEntry]:
@@ -656,16 +662,25 @@ def read_bytes(data: bytes, name: str) -> tuple[list[DistortionEntry], str]:
     ``not_database`` record, then one for each ``<distortion>`` in it, so
     that none is lost; none of them is audited.
     """
+    rows, error = read_rows(data)
+    return [DistortionEntry(name, *row) for row in rows], error
+
+
+def read_rows(data: bytes) -> tuple[list[EntryRow], str]:
+    """:func:`read_bytes` as rows (see :data:`EntryRow`), which name no file."""
     parsed = parse_file(data)
-    entries = [] if parsed.root is None else list(entries_from_tree(parsed.root, name))
+    rows = [] if parsed.root is None else rows_from_tree(parsed.root)
     if not parsed.error:
-        return entries, ""
-    head = _error_entry(name, parsed.line, parsed.status, parsed.error)
-    if parsed.status == STATUS_XML_ERROR:
-        entries = marked(entries, parsed.status, parsed.entry_message)
+        return rows, ""
+    status, message = parsed.status, parsed.entry_message
+    head = _error_row(parsed.line, status, parsed.error)
+    if status == STATUS_XML_ERROR:  # each entry's own problems kept in front
+        rows = [
+            (*row[:-2], status, f"{row[-1]}; {message}" if row[-1] else message) for row in rows
+        ]
     else:
-        entries = [_replace_status(e, parsed.status, parsed.entry_message) for e in entries]
-    return [head, *entries], parsed.error
+        rows = [(*row[:-2], status, message) for row in rows]
+    return [head, *rows], parsed.error
 
 
 def use_local_names(root: etree._Element) -> None:
@@ -836,7 +851,7 @@ def read_regular_file(path: Path) -> bytes:
 def unreadable_file(name: str, error: OSError) -> tuple[list[DistortionEntry], str]:
     """The record and file error of a file that could not be read."""
     message = f"cannot read file: {_reason(error)}"
-    return [_error_entry(name, 0, STATUS_UNREADABLE, message)], message
+    return [DistortionEntry(name, *_error_row(0, STATUS_UNREADABLE, message))], message
 
 
 def load_files(targets: Iterable[tuple[Path, str]], cache: EntryCache | None = None) -> LoadResult:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from bisect import bisect_right
 from collections.abc import Callable, Collection, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from functools import cached_property, partial
 from itertools import accumulate
 from operator import attrgetter
@@ -377,7 +377,8 @@ def _audit_files(
 
         for name in formats:
             row_format(name)
-        results = parse_all([job for _, job in jobs], partial(_parse, formats=formats), _metrics)
+        parse = partial(_parse, formats=formats, digests=store is not None)
+        results = parse_all([job for _, job in jobs], parse, _metrics)
         for (index, job), (digest, packed, count, error, row_texts) in zip(
             jobs, results, strict=True
         ):
@@ -428,29 +429,31 @@ def _metrics() -> None:
     from . import metrics  # noqa: F401  (the import is the point)
 
 
-def _parse(job: Job, formats: tuple[str, ...]) -> tuple:
+def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
     """What the audit needs of one file: the digest of the bytes parsed (None if
-    unreadable), packed entries, their count, the file error, and each row
-    format's texts of every row before and after its metrics."""
-    from .cache import content_digest, entry_columns, pack_columns
+    unreadable, or not wanted), packed entries, their count, the file error,
+    and each row format's texts of every row before and after its metrics."""
+    from .cache import content_digest, pack_columns
 
+    digest = None
     try:
         data = job.data if job.data is not None else loader.read_regular_file(job.path)
     except OSError as os_error:
         entries, error = loader.unreadable_file(job.name, os_error)
-        digest = None
+        rows = [astuple(entry)[1:] for entry in entries]
     else:
-        entries, error = loader.read_bytes(data, job.name)
-        digest = content_digest(data)
-    columns = entry_columns(entries)
-    packed = pack_columns(columns, len(entries))
+        rows, error = loader.read_rows(data)
+        if digests:
+            digest = content_digest(data)
+    columns = loader.row_columns(rows)
+    packed = pack_columns(columns, len(rows))
     row_texts = {}
     if formats:
         from .formats import row_format
 
-        columns["file"] = [job.name] * len(entries)
+        columns["file"] = [job.name] * len(rows)
         row_texts = {name: row_format(name).row_texts(columns) for name in formats}
-    return digest, packed, len(entries), error, row_texts
+    return digest, packed, len(rows), error, row_texts
 
 
 def _compute(parts: list[FileColumns]) -> metrics.Metrics:
