@@ -14,13 +14,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import normalizer
 from .solver import min_positive_root
+
+# Exact arithmetic is imported where it is needed: few inputs ever take that path.
+if TYPE_CHECKING:
+    from fractions import Fraction
 
 FloatArray = NDArray[np.float64]
 
@@ -78,6 +82,8 @@ def _exact_distortion(
     model: str, a: float, b: float, c: float, k1: float, k2: float
 ) -> list[Fraction]:
     """Coefficients of D(r) as written, highest power first, in exact arithmetic."""
+    from fractions import Fraction
+
     if model == "ptlens":
         a_, b_, c_ = Fraction(a), Fraction(b), Fraction(c)
         return [a_, b_, c_, 1 - a_ - b_ - c_, Fraction(0)]
@@ -102,6 +108,8 @@ def _exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, f
     fit (k <= 0, even for w = r^2), rounded once and solved; d_max = D(r_max)
     is evaluated exactly and rounded once, so no intermediate overflows.
     """
+    from fractions import Fraction
+
     degree = len(distortion) - 1
     # D'(r), lowest power first; its powers of w are every power-th one.
     slope = [(j + 1) * distortion[degree - j - 1] for j in range(degree)]

@@ -58,10 +58,14 @@ from __future__ import annotations
 
 import math
 import struct
-from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+# Exact arithmetic is imported where it is needed: few inputs ever take that path.
+if TYPE_CHECKING:
+    from fractions import Fraction
 
 FloatArray = NDArray[np.float64]
 #: Mantissas and exponents of a, b, c, as numpy.frexp gives them.
@@ -117,6 +121,8 @@ def _q_bound(x: FloatArray, A: FloatArray, B: FloatArray, C: FloatArray) -> Floa
 
 def _exact_discriminant_sign(A: float, B: float, C: float) -> int:
     """Sign of the discriminant of x^3 + A x^2 + B x + C, in exact arithmetic."""
+    from fractions import Fraction
+
     A, B, C = Fraction(A), Fraction(B), Fraction(C)
     value = 18 * A * B * C - 4 * A**3 * C + A * A * B * B - 4 * B**3 - 27 * C * C
     return (value > 0) - (value < 0)
@@ -735,6 +741,8 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
 
     ``estimate`` only saves time: the search starts around it.
     """
+    from fractions import Fraction
+
     P = _integer_cubic(a, b, c)
     P0, P1, P2, P3 = P
     kind = _exact_kind(*P)

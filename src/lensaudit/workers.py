@@ -199,6 +199,8 @@ def _collect(output: int) -> dict[int, Any]:
 
 def _stop(children: dict[int, int]) -> None:
     """End and reap workers whose results were not collected (an error here)."""
+    if not children:
+        return
     import signal
 
     for pid, output in children.items():
