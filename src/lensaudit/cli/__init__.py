@@ -50,9 +50,15 @@ class LazyGroup(click.Group):
         ]
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name not in self.list_commands(ctx):
+        if cmd_name not in SUBCOMMANDS:
             return None
-        module = import_module(f"{__name__}.{SUBCOMMANDS[cmd_name][0]}")
+        name = f"{__name__}.{SUBCOMMANDS[cmd_name][0]}"
+        try:
+            module = import_module(name)
+        except ModuleNotFoundError as error:  # that command is not installed
+            if error.name != name:
+                raise
+            return None
         return getattr(module, cmd_name)
 
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
