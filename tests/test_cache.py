@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 import lensaudit.cache as cache_module
 from conftest import lens_xml
-from lensaudit import loader, store
+from lensaudit import loader, pipeline, store
 from lensaudit.cache import ParseCache, cache_dir, pack_entries, unpack_entries
 from lensaudit.cli import main
 from lensaudit.formats import csv_format, json_format
@@ -75,12 +75,18 @@ def count_parses(monkeypatch) -> list[str]:
     """Names of the files parsed from now on (the cache parses none itself)."""
     calls: list[str] = []
     real = loader.read_bytes
+    real_parse = pipeline._parse
 
     def counting(data, name):
         calls.append(name)
         return real(data, name)
 
+    def counting_parse(job, *arguments, **options):  # the audit's own reading
+        calls.append(job.name)
+        return real_parse(job, *arguments, **options)
+
     monkeypatch.setattr(loader, "read_bytes", counting)
+    monkeypatch.setattr(pipeline, "_parse", counting_parse)
     return calls
 
 
