@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -184,48 +183,44 @@ def _write_outputs(result, output_dir: Path, cache_dir: Path | None) -> list[Pat
     return written
 
 
-#: Names of the figures in the cache directory: a prefix, the key, the format.
-_FIGURE_CACHE_PREFIX = "history-trend-"
-
-
 def _figures(result, title: str, history_csv: str, cache_dir: Path | None) -> dict[str, bytes]:
     """trend.png and trend.svg: drawn, or as drawn last time for the same
     history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
-    import and to draw, and the history of an unchanged repository is the same)."""
+    import and to draw, and the history of an unchanged repository is the same).
+
+    The last figures drawn are kept in the store file ``history-trend.cache``
+    of the cache directory (see :mod:`lensaudit.store`).
+    """
     import hashlib
     from importlib.metadata import PackageNotFoundError, version
 
-    from ..history import _fingerprint
+    from ..cache import record_file
+    from ..history.cache import fingerprint, store_format
 
     try:
         matplotlib_version = version("matplotlib")
     except PackageNotFoundError:
         matplotlib_version = ""
-    digest = hashlib.sha256(
-        "\0".join((_fingerprint(), matplotlib_version, title, history_csv)).encode()
-    ).hexdigest()[:32]
+    key = hashlib.sha256(
+        "\0".join((fingerprint(), matplotlib_version, title, history_csv)).encode()
+    ).hexdigest()
     names = ("trend.png", "trend.svg")
-    cached = (
-        {name: cache_dir / f"{_FIGURE_CACHE_PREFIX}{digest}{Path(name).suffix}" for name in names}
-        if cache_dir is not None
-        else {}
-    )
-    if cached:
-        try:
-            return {name: cached[name].read_bytes() for name in names}
-        except OSError:
-            pass
+    stored = None
+    if cache_dir is not None:
+        stored = record_file("history", "trend", store_format(), cache_dir)
+        found = stored.read()
+        if (
+            isinstance(found, tuple)
+            and len(found) == 1 + len(names)
+            and found[0] == key
+            and all(isinstance(data, bytes) for data in found[1:])
+        ):
+            return dict(zip(names, found[1:], strict=True))
     figures = _draw(result, title)
-    if cached:
+    if stored is not None:
         try:
-            cache_dir.mkdir(parents=True, exist_ok=True)
-            for stale in cache_dir.glob(f"{_FIGURE_CACHE_PREFIX}*"):
-                stale.unlink(missing_ok=True)
-            for name in names:
-                temporary = cached[name].with_name(cached[name].name + f".{os.getpid()}.tmp")
-                temporary.write_bytes(figures[name])
-                temporary.replace(cached[name])
-        except OSError:
+            stored.write((key, *(figures[name] for name in names)))
+        except (OSError, ValueError):
             pass  # the figures are written to the output directory all the same
     return figures
 

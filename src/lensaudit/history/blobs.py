@@ -1,0 +1,68 @@
+"""Stage 2, blobs: which file versions (git blobs) make up the database at each
+commit, and their contents, all through one ``git cat-file --batch``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import PurePosixPath
+
+from .commits import Git, HistoryError
+
+
+def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
+    """{name: blob id} of the ``*.xml`` files directly in a raw git tree object.
+
+    Subdirectories, symbolic links and submodules are not database files.
+    """
+    files = {}
+    position, end = 0, len(data)
+    while position < end:
+        space = data.index(b" ", position)
+        nul = data.index(b"\0", space)
+        start = nul + 1
+        mode, name = data[position:space], data[space + 1 : nul]
+        position = start + oid_size
+        if mode.startswith(b"100") and name.lower().endswith(b".xml"):
+            files[name.decode("utf-8", "surrogateescape")] = data[start:position].hex()
+    return files
+
+
+def file_maps(
+    git: Git, hashes: list[str], db_path: str, oid_size: int
+) -> tuple[dict[str, dict[str, str]], set[str]]:
+    """{commit: {file name: blob id}} of the database at each commit ({} if absent),
+    and the commits where the path exists at all."""
+    by_tree: dict[str, dict[str, str]] = {}
+    maps = {}
+    present = set()
+    requests = [f"{h}:{db_path}" for h in hashes]
+    for commit, answer in zip(hashes, git.objects(requests), strict=True):
+        if answer is None:
+            maps[commit] = {}
+            continue
+        present.add(commit)
+        oid, kind, data = answer
+        if kind == "tree":
+            if oid not in by_tree:
+                by_tree[oid] = _tree_files(data, oid_size)
+            maps[commit] = by_tree[oid]
+        elif kind == "blob":
+            maps[commit] = {PurePosixPath(db_path).name: oid}
+        else:
+            maps[commit] = {}
+    return maps, present
+
+
+def read_blobs(
+    git: Git, blobs: list[str], progress: Callable[[int, int], None] | None = None
+) -> dict[str, bytes]:
+    """{blob id: content} of file versions, through one ``git cat-file --batch``;
+    ``progress(done, total)`` is called as they come."""
+    contents: dict[str, bytes] = {}
+    for done, (blob, answer) in enumerate(zip(blobs, git.objects(blobs), strict=True), 1):
+        if answer is None:
+            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
+        contents[blob] = answer[2]
+        if progress is not None:
+            progress(done, len(blobs))
+    return contents

@@ -1,0 +1,158 @@
+"""Stage 5, introduced: which commit introduced each entry's coefficients.
+
+Walking the commits parents first, each entry of a changed file inherits the
+introducer of an identical entry (same identity) in its first parent that
+holds one, the same file first; a commit introduces what no parent holds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from .audit import Auditor, BlobAudit, Parsed, revision
+from .commits import Commit
+from .results import IntroducedEntry, Revision
+
+# Index into a history's commits meaning "already there before the first commit examined".
+_BEFORE = -1
+
+
+class _FileState:
+    """One file of one revision, as the history sees it: its blob, the
+    identities of its entries and, for each, the commit that introduced it."""
+
+    __slots__ = ("blob", "idents", "introducers", "_index")
+
+    def __init__(self, blob: str, idents: tuple[int, ...], introducers: tuple[int, ...]):
+        self.blob = blob
+        self.idents = idents
+        self.introducers = introducers
+        self._index: dict[int, int] | None = None
+
+    def introducer(self, ident: int) -> int | None:
+        """Introducer of the first entry with this identity, or None."""
+        if self._index is None:
+            # Built reversed, so that the first occurrence of an identity wins.
+            self._index = dict(zip(reversed(self.idents), reversed(self.introducers), strict=True))
+        return self._index.get(ident)
+
+
+_State = dict[str, _FileState]
+
+
+def _find_introducer(ident: int, path: str, parents: list[_State]) -> int | None:
+    """Introducer of an identical entry in the first parent that has one (same
+    file first), or None when no parent has it."""
+    for parent in parents:
+        same = parent.get(path)
+        if same is not None:
+            found = same.introducer(ident)
+            if found is not None:
+                return found
+        for name, state in parent.items():
+            if name != path:
+                found = state.introducer(ident)
+                if found is not None:
+                    return found
+    return None
+
+
+def _next_state(
+    index: int, files: dict[str, str], parents: list[_State], audits: dict[str, BlobAudit]
+) -> _State:
+    """The file states of commit ``index``, given those of its parents."""
+    first = parents[0] if parents else {}
+    state: _State = {}
+    for path, blob in files.items():
+        previous = first.get(path)
+        if previous is not None and previous.blob == blob:
+            state[path] = previous
+            continue
+        audit = audits[blob]
+        if audit.error:
+            # Unreadable: keep the entries of the file's last readable version.
+            carried = next((p[path] for p in parents if path in p), None)
+            state[path] = _FileState(
+                blob, carried.idents if carried else (), carried.introducers if carried else ()
+            )
+            continue
+        introducers = []
+        for ident in audit.idents:
+            found = _find_introducer(ident, path, parents)
+            introducers.append(index if found is None else found)
+        state[path] = _FileState(blob, audit.idents, tuple(introducers))
+    return state
+
+
+def parents_of(commit: Commit, first_parent: bool) -> tuple[str, ...]:
+    """The parents the history follows from ``commit``."""
+    return commit.parents[:1] if first_parent else commit.parents
+
+
+def walk(
+    commits: list[Commit],
+    outside: list[str],
+    files: dict[str, dict[str, str]],
+    first_parent: bool,
+    mainline: set[str],
+    audits: dict[str, BlobAudit],
+) -> tuple[dict[str, _State], list[Revision]]:
+    """The file states of every commit, walking parents before children, and the
+    revisions of the commits that change the database (``files``: {commit:
+    {name: blob id}}). The entries of ``outside`` commits, parents of the first
+    ones examined, count as there before them."""
+    states: dict[str, _State] = {
+        p: {
+            name: _FileState(blob, audits[blob].idents, (_BEFORE,) * len(audits[blob].idents))
+            for name, blob in files[p].items()
+        }
+        for p in outside
+    }
+    revisions = []
+    for index, commit in enumerate(commits):
+        parent_hashes = parents_of(commit, first_parent)
+        mine = files[commit.hash]
+        if parent_hashes and files[parent_hashes[0]] == mine:
+            states[commit.hash] = states[parent_hashes[0]]
+            continue
+        states[commit.hash] = _next_state(index, mine, [states[p] for p in parent_hashes], audits)
+        revisions.append(revision(commit, commit.hash in mainline, mine, audits))
+    return states, revisions
+
+
+def introduced_entries(
+    files: dict[str, str],
+    state: _State,
+    parsed: dict[str, Parsed],
+    auditor: Auditor,
+    commits: list[Commit],
+) -> list[IntroducedEntry]:
+    """Entries of the newest revision with a finite r_max, with their introducers."""
+    import numpy as np
+
+    m = auditor.metrics
+    assert m is not None
+    introduced = []
+    for name in sorted(files):
+        blob = parsed[files[name]]
+        if blob.error or blob.kept is None:
+            continue  # an unreadable file has no audited entry
+        for entry, key, introducer in zip(
+            blob.kept, blob.audit_keys, state[name].introducers, strict=True
+        ):
+            if not np.isfinite(m.r_max[key]):
+                continue
+            if entry.file != name:  # the same content under two names
+                entry = replace(entry, file=name)
+            introduced.append(
+                IntroducedEntry(
+                    entry,
+                    float(m.r_max[key]),
+                    float(m.d_max[key]),
+                    float(m.r_normalized[key]),
+                    float(m.r_normalized_paper[key]),
+                    bool(m.folds_in_image[key]),
+                    None if introducer == _BEFORE else commits[introducer],
+                )
+            )
+    return introduced

@@ -1,0 +1,115 @@
+"""Stage 6, outputs: ``history.csv`` and ``introduced.csv`` as text, and the
+trend figure."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, TextIO
+
+if TYPE_CHECKING:
+    import pandas
+    from matplotlib.figure import Figure
+
+#: The day the paper's snapshot of the Lensfun database was taken.
+PAPER_SNAPSHOT = "2021-05-30"
+
+
+def write_csv(
+    stream: TextIO,
+    columns: Sequence[str],
+    records: list[dict[str, Any]],
+    float_columns: frozenset[str],
+) -> None:
+    """Write ``records`` under a header of ``columns``: values of ``float_columns``
+    round-trip (``inf``, ``nan``), booleans as ``true``/``false``."""
+    import csv
+
+    from ..pipeline import format_float
+
+    out = csv.writer(stream, lineterminator="\n")
+    out.writerow(columns)
+    for record in records:
+        out.writerow(
+            [
+                format_float(value)
+                if name in float_columns
+                else ("true" if value else "false")
+                if isinstance(value, bool)
+                else value
+                for name, value in record.items()
+            ]
+        )
+
+
+def trend_figure(history_frame: pandas.DataFrame, title: str | None = None) -> Figure:
+    """The database over time: entries, share with finite r_max, folds.
+
+    ``history_frame`` is :meth:`History.to_dataframe` (or ``history.csv``
+    read with pandas). Only first-parent ("mainline") commits are drawn, so
+    that a branch merged later does not zigzag the curves, in date order. The top panel
+    shows entries audited and the share of them with a finite r_max; the
+    bottom one counts entries folding inside their own image, in Hugin units
+    and in the paper's mixed units (rectilinear lenses, as in the paper).
+    The paper's snapshot date is marked on both.
+    """
+    import numpy as np
+    import pandas
+    from matplotlib.figure import Figure
+
+    rows = history_frame
+    if "mainline" in rows:
+        rows = rows[rows["mainline"].astype(str).str.lower().isin(["true", "1"])]
+    # By date: a rebased commit may keep a committer date older than its parent's.
+    rows = rows.assign(date=pandas.to_datetime(rows["date"], utc=True)).sort_values(
+        "date", kind="stable"
+    )
+    dates = rows["date"].dt.tz_convert(None).to_numpy()
+    figure = Figure(figsize=(9, 6.5), layout="constrained")
+    top, bottom = figure.subplots(2, 1, sharex=True)
+    if title:
+        figure.suptitle(title)
+
+    top.step(dates, rows["audited"], where="post", color="C0", label="entries audited")
+    top.set_ylabel("entries audited")
+    share = top.twinx()
+    share.step(
+        dates,
+        100 * rows["share_finite"].astype(float),
+        where="post",
+        color="C1",
+        label="with finite r_max (%)",
+    )
+    share.set_ylabel("with finite r_max (%)")
+    share.set_ylim(0, 100)
+    handles = top.get_legend_handles_labels()[0] + share.get_legend_handles_labels()[0]
+    top.legend(handles=handles, loc="upper left")
+
+    for column, label, style in (
+        ("folds_in_image", "inside own image (Hugin units), all types", "-"),
+        ("folds_in_image_rectilinear", "inside own image (Hugin units), rectilinear", "--"),
+        ("folds_in_image_paper_units_rectilinear", "paper's mixed units, rectilinear", ":"),
+    ):
+        bottom.step(dates, rows[column], where="post", linestyle=style, label=label)
+    bottom.set_ylabel("entries folding")
+    highest = int(rows["folds_in_image"].max()) if len(rows) else 0
+    bottom.set_ylim(-0.3, 1.6 * highest + 1.5)  # room for the legend above the curves
+    bottom.legend(loc="upper left")
+
+    snapshot = np.datetime64(PAPER_SNAPSHOT)
+    for axes in (top, bottom):
+        axes.axvline(snapshot, color="0.35", linewidth=1, linestyle="-.")
+        axes.grid(alpha=0.3)
+    top.annotate(
+        f"paper's snapshot {PAPER_SNAPSHOT}",
+        (snapshot, 1),
+        xycoords=("data", "axes fraction"),
+        xytext=(-4, -4),
+        textcoords="offset points",
+        ha="right",
+        va="top",
+        fontsize=8,
+        color="0.35",
+    )
+    if len(dates) == 0:
+        bottom.text(0.5, 0.5, "no revision", transform=bottom.transAxes, ha="center")
+    return figure
