@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,9 +26,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lensaudit import loader
-from lensaudit.history import audit as audit_stage
-from lensaudit.history import cache as history_cache
-from lensaudit.history import parse as parse_stage
 from lensaudit.cli import main
 from lensaudit.history import (
     HISTORY_COLUMNS,
@@ -37,6 +35,9 @@ from lensaudit.history import (
     audit_revision,
     trend_figure,
 )
+from lensaudit.history import audit as audit_stage
+from lensaudit.history import cache as history_cache
+from lensaudit.history import parse as parse_stage
 
 # The shared data directory beside the project's checkout.
 BUNDLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "lensfun-db-history.bundle"
@@ -521,6 +522,101 @@ def test_an_unusable_cache_directory_is_a_warning_not_an_error(repo, tmp_path):
     blocker.write_text("")
     result = audit_history(repo.path, cache_dir=blocker)
     assert result.revisions and result.warnings and "not used" in result.warnings[0]
+
+
+def damaged(path: Path, flips: list[tuple[int, int]]) -> bool:
+    """Flip bits of a file's bytes (positions taken modulo its size); whether it changed."""
+    original = path.read_bytes()
+    data = bytearray(original)
+    for position, mask in flips:
+        data[position % len(data)] ^= mask
+    path.write_bytes(data)
+    return bytes(data) != original
+
+
+FLIPS = st.lists(st.tuples(st.integers(0, 1 << 24), st.integers(1, 255)), min_size=1, max_size=4)
+
+
+@settings(max_examples=25, deadline=None)
+@given(flips=FLIPS)
+def test_damaged_blob_audits_give_the_uncached_history_and_are_rebuilt(repo, flips):
+    uncached = csv_text(audit_history(repo.path))
+    with tempfile.TemporaryDirectory() as directory:
+        cache = Path(directory)
+        audit_history(repo.path, cache_dir=cache)
+        (cache / "history-run.cache").unlink()  # the run must be made from the blob audits
+        if not damaged(cache / "history-blobs.cache", flips):
+            return
+        again = audit_history(repo.path, cache_dir=cache)
+        assert csv_text(again) == uncached and again.blobs_cached == 0
+        (cache / "history-run.cache").unlink()
+        rebuilt = audit_history(repo.path, cache_dir=cache)
+        assert rebuilt.blobs_cached == rebuilt.blobs and csv_text(rebuilt) == uncached
+
+
+@settings(max_examples=25, deadline=None)
+@given(flips=FLIPS)
+def test_a_damaged_last_run_gives_the_uncached_history(repo, flips):
+    uncached = csv_text(audit_history(repo.path))
+    with tempfile.TemporaryDirectory() as directory:
+        cache = Path(directory)
+        audit_history(repo.path, cache_dir=cache)
+        if not damaged(cache / "history-run.cache", flips):
+            return
+        again = audit_history(repo.path, cache_dir=cache)
+        assert csv_text(again) == uncached and again.blobs_parsed == 3  # the newest revision's
+
+
+def test_a_warm_run_gives_the_history_of_a_cold_one_field_by_field(repo, tmp_path):
+    cold = audit_history(repo.path)
+    audit_history(repo.path, cache_dir=tmp_path)
+    warm = audit_history(repo.path, cache_dir=tmp_path)
+    assert warm.blobs_parsed == 0
+    assert warm.revisions == cold.revisions and warm.newest == cold.newest
+    # repr: NaN coefficients never equal themselves
+    assert repr(warm.introduced) == repr(cold.introduced)
+
+
+def test_sqlite_files_of_the_earlier_cache_are_removed(repo, tmp_path):
+    legacy = [
+        tmp_path / "history-0.1.0-0123456789abcdef.sqlite3",
+        tmp_path / "history-trend-0a.png",
+    ]
+    for path in legacy:
+        path.write_bytes(b"SQLite format 3\0")
+    audit_history(repo.path, cache_dir=tmp_path)
+    assert not any(path.exists() for path in legacy)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "history-blobs.cache",
+        "history-run.cache",
+    ]
+
+
+def test_history_files_count_in_the_bound_of_the_cache_directory(repo, tmp_path, monkeypatch):
+    from lensaudit import cache as parse_cache
+
+    for name in ("parsed-0.cache", "parsed-1.cache"):
+        (tmp_path / name).write_bytes(b"x")
+        os.utime(tmp_path / name, (1, 1))  # least recently used
+    monkeypatch.setattr(parse_cache, "MAX_CACHE_FILES", 2)
+    audit_history(repo.path, cache_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "history-blobs.cache",
+        "history-run.cache",
+    ]
+
+
+def test_a_scan_evicts_history_files_beyond_the_bound(repo, tmp_path, monkeypatch):
+    from lensaudit import cache as parse_cache
+    from lensaudit.pipeline import run
+
+    audit_history(repo.path, cache_dir=tmp_path)
+    for path in tmp_path.iterdir():
+        os.utime(path, (1, 1))
+    monkeypatch.setattr(parse_cache, "MAX_CACHE_FILES", 1)
+    monkeypatch.setenv("LENSAUDIT_CACHE_DIR", str(tmp_path))
+    run(repo.path / "data" / "db", cache=True)
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith("history")] == []
 
 
 def test_work_tree_index_and_refs_are_left_as_they_are(repo):
