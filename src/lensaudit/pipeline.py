@@ -369,16 +369,12 @@ def _audit_files(
         jobs.append((index, Job(path, name, data)))
 
     if jobs:
-        # What parsing needs, imported once, before any worker is forked.
-        from lxml import etree  # noqa: F401
+        from .early import adopt
 
-        from . import cache  # noqa: F401
-        from .formats import row_format
-
-        for name in formats:
-            row_format(name)
-        parse = partial(_parse, formats=formats, digests=store is not None)
-        results = parse_all([job for _, job in jobs], parse, _metrics)
+        # A worker started with the command may be parsing these files already.
+        adopted = adopt(formats, store is not None)
+        parse = file_parser(formats, digests=store is not None)
+        results = parse_all([job for _, job in jobs], parse, _metrics, adopted)
         for (index, job), (digest, packed, count, error, row_texts) in zip(
             jobs, results, strict=True
         ):
@@ -427,6 +423,19 @@ def _audit_files(
 def _metrics() -> None:
     """Import the metrics, and with them numpy: what the caller does while files are parsed."""
     from . import metrics  # noqa: F401  (the import is the point)
+
+
+def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tuple]:
+    """What parses a file for an audit (see :func:`_parse`), with what it needs
+    imported, once, before any worker is forked."""
+    from lxml import etree  # noqa: F401
+
+    from . import cache  # noqa: F401
+    from .formats import row_format
+
+    for name in formats:
+        row_format(name)
+    return partial(_parse, formats=formats, digests=digests)
 
 
 def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:

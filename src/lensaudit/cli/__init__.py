@@ -117,11 +117,18 @@ def run() -> NoReturn:
     command's exit status. Anything but an exit (an interrupt, a crash) takes
     Python's usual way out.
     """
+    if sys.argv[1:2] == ["scan"]:
+        from .. import early
+
+        early.start(sys.argv[2:])
     try:
         main()  # click's standalone mode: always ends in SystemExit
         code: object = 0
     except SystemExit as end:
         code = end.code
+    finally:
+        if "lensaudit.early" in sys.modules:
+            sys.modules["lensaudit.early"].stop()
     if code is None:
         code = 0
     elif not isinstance(code, int):
