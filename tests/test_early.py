@@ -174,7 +174,7 @@ def test_worker_that_listed_some_files_leaves_the_others_to_the_scan(
     )
 
 
-def test_files_the_cache_knows_are_not_listed(bundled_db, tmp_path, two_cpus, adoptions):
+def test_a_database_the_cache_has_met_is_left_to_the_scan(bundled_db, tmp_path, two_cpus, adoptions):
     database = tmp_path / "db"
     shutil.copytree(bundled_db, database)
     output_of(["-f", "csv", str(database)])  # the cache now knows every file

@@ -326,6 +326,21 @@ def record_file(
     )
 
 
+def _set_name(paths: list[Path]) -> str:
+    """The name of the store file of a set of files."""
+    # os.fsencode keeps file names that are not UTF-8 (surrogate escapes) as bytes.
+    return blake2b(b"\0".join(sorted(map(os.fsencode, paths))), digest_size=8).hexdigest()
+
+
+def may_know(paths: list[Path], directory: Path | None = None) -> bool:
+    """Whether the cache of the set of files ``paths`` exists, without reading it
+    (see :class:`ParseCache`): if not, no file of the set is known."""
+    try:
+        return record_file(_KIND, _set_name(paths), _FORMAT, directory).path.exists()
+    except (OSError, RuntimeError, ValueError):
+        return False
+
+
 class ParseCache:
     """Parsed entries, metrics and rendered rows of files, keyed by absolute path,
     valid while the file's content hashes to the stored digest.
@@ -346,10 +361,7 @@ class ParseCache:
         if not _PACKABLE:  # entries of a layout this module cannot store
             return
         try:
-            # os.fsencode keeps file names that are not UTF-8 (surrogate escapes) as bytes.
-            key = b"\0".join(sorted(map(os.fsencode, paths)))
-            name = blake2b(key, digest_size=8).hexdigest()
-            self._file = record_file(_KIND, name, _FORMAT, directory)
+            self._file = record_file(_KIND, _set_name(paths), _FORMAT, directory)
         except (OSError, RuntimeError, ValueError):
             return
         self.path = self._file.path

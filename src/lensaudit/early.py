@@ -6,18 +6,19 @@ the console command calls :func:`start` before anything else: it forks a
 worker that guesses from the words of the command line which files the scan
 will parse (its paths, output format, and whether the cache is on), lists
 them, and parses them largest first, taking each from a queue that the scan
-can take from too.
+can take from too. With the cache on, a database the cache has met before
+is left alone: the scan is likely to find it there.
 
 When the scan reaches its parsing (:func:`lensaudit.workers.parse_all`), it
 calls :func:`adopt` with how it parses. If the worker parses the same way,
 the scan takes files from the same queue: each file it needs it parses
 itself, and takes the worker's results for those the worker took; a file
-the worker listed that the scan does not need (the cache knew it) is left
-to the worker, and one it did not list is parsed by the scan. Results are
-matched to files by path and carry the digest of the bytes they were made
-from, as any worker's do. A worker that guessed wrong, or is never adopted
-(bad usage, a cache that knew every file), is stopped: a wrong guess costs
-only the other CPU's time, never a wrong result.
+the worker listed that the scan does not need is left to the worker, and one
+it did not list is parsed by the scan. Results are matched to files by path
+and carry the digest of the bytes they were made from, as any worker's do.
+A worker that guessed wrong, or is never adopted (bad usage, nothing to
+parse), is stopped: a wrong guess costs only the other CPU's time, never a
+wrong result.
 
 The guess reads the options of ``lensaudit scan`` from :data:`SCAN_OPTIONS`,
 which a test keeps equal to the command's own.
@@ -242,18 +243,19 @@ def _work(words: list[str], manifest: int, queue: int, queue_input: int, output:
 
 
 def _jobs(found: Guess) -> list:
-    """The files the scan will parse: those of the database that the cache (if
-    on) does not know."""
+    """The files the scan will parse: every file of the database, unless the
+    cache is on and has met these files before (then the scan is likely to
+    find them there: reading the cache here too would only double that work)."""
     from . import loader
     from .database import resolve_paths
     from .workers import Job
 
     targets = loader.expand(resolve_paths(list(found.paths) or None))
     if found.cache:
-        from .cache import ParseCache
+        from .cache import may_know
 
-        store = ParseCache([path for path, _ in targets])
-        targets = [(path, name) for path, name in targets if not store.knows(path)]
+        if may_know([path for path, _ in targets]):
+            return []
     return [Job(path, name) for path, name in targets]
 
 
