@@ -1,0 +1,203 @@
+"""Findings about a Lensfun database, or about a change to one: the CI gate.
+
+:func:`check` audits a database and turns what it finds into
+:class:`Finding` records, each with a severity, a code, ``file:line`` and one
+sentence. Errors make the check fail; warnings and notices do not.
+
+- Folds (entries that load and were audited): ``fold-in-image`` (error) when
+  the model folds back inside its own image, r_normalized < 1;
+  ``fold-near-image`` (warning) when the fold lies just outside, r_normalized
+  below the margin; ``fold-outside-image`` (notice, only when asked for) for
+  any other finite r_max. r_normalized = D(r_max) / hypot(aspect, 1), both in
+  Hugin units (1 = half the short side of the calibration image).
+- Input (errors): ``xml-error`` (the file is not well-formed XML; its entries
+  are counted but not checked further), ``not-a-database`` (well-formed, but
+  its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
+  ``bad-value`` (not a finite number, focal or crop factor <= 0),
+  ``unknown-model``, ``no-lens``, ``r-max-not-computable``.
+- Vignetting and TCA (see :mod:`lensaudit.vignetting` and :mod:`lensaudit.tca`):
+  ``vignetting-zero-in-image`` (error) when the correction's C(r) reaches 0
+  inside the image, ``vignetting-low-in-image`` (warning) when it falls below
+  0.1, ``vignetting-not-monotone`` (notice, only when asked for) when it turns,
+  ``tca-fold-in-image`` (error) when a colour channel folds inside the image;
+  a ``<vignetting>`` or ``<tca>`` element that cannot be audited is one of the
+  input errors above, its message naming the element.
+- Duplicates: ``duplicate-lens`` (maker, model and crop factor of an earlier
+  ``<lens>``, names compared ignoring letter case and runs of white space)
+  and ``duplicate-focal`` (a second ``<distortion>`` for the same focal
+  length in one calibration) are errors, or warnings when the two are
+  identical, since liblensfun then loses nothing by keeping one of them.
+
+With a baseline (a directory, or a git revision of the repository that holds
+the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
+tree is never touched), a finding is new only when the baseline has no
+finding of the same severity and code with the same identity; the others are
+``known`` and never fail the check. Identity is content, never position or
+line: an entry is its lens (maker and model, compared ignoring case and all
+white space) and its own values (model, focal length, crop factor, aspect
+ratio, type, coefficients); a duplicate is its lens or calibration and the
+pair it is made of; a file-level finding is the file's name and the problem.
+What the baseline does not match exactly may still match less specifically:
+an entry or a duplicate by its values alone (its lens was renamed), then a
+duplicate by its lens and focal length, or its name, alone (one of the pair
+was edited). Each baseline finding
+matches one finding only, so that a copy of a known entry under a new lens,
+or a third definition of a known duplicate lens, is new.
+
+A baseline file that cannot be parsed is replaced by its last readable
+version in the git history (among the last :data:`HISTORY_DEPTH` commits that
+changed it), and a ``baseline-unreadable`` notice says so. Without one (or
+for a directory baseline), the findings in that file are not counted as new,
+and the notice says that too.
+
+The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
+checked and the baseline's), :mod:`~lensaudit.check.parsing` (one parse per
+file), :mod:`~lensaudit.check.findings` and
+:mod:`~lensaudit.check.duplicates` (the rules),
+:mod:`~lensaudit.check.matching` (what the baseline already has) and
+:mod:`~lensaudit.check.result` (the records); the output formats are
+:mod:`lensaudit.check_formats`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+
+from .. import database
+from .findings import analyse, analyse_parsed, fix_suggestion
+from .inputs import (
+    HISTORY_DEPTH,
+    GitOrigin,
+    Source,
+    baseline_sources,
+    sources_from_git,
+    sources_from_paths,
+)
+from .matching import baseline_notices, compare, readable_baseline
+from .parsing import parse_source
+from .result import (
+    BAD_VALUE,
+    BASELINE_UNREADABLE,
+    DEFAULT_MARGIN,
+    DUPLICATE_FOCAL,
+    DUPLICATE_LENS,
+    FILE_CODES,
+    FOLD_IN_IMAGE,
+    FOLD_NEAR_IMAGE,
+    FOLD_OUTSIDE_IMAGE,
+    MESSAGE_LIMIT,
+    MISSING_ATTRIBUTE,
+    NAME_LIMIT,
+    NO_LENS,
+    NOT_A_DATABASE,
+    NOT_COMPUTABLE,
+    QUOTED_LIMIT,
+    SEVERITIES,
+    SEVERITY_ERROR,
+    SEVERITY_NOTICE,
+    SEVERITY_WARNING,
+    UNKNOWN_MODEL,
+    UNREADABLE,
+    XML_ERROR,
+    CheckedFile,
+    CheckError,
+    CheckResult,
+    Finding,
+    Identified,
+    describe,
+    entry_key,
+)
+
+#: The name the lensaudit fix command suggestion had when this was one module.
+_fix_suggestion = fix_suggestion
+
+__all__ = [
+    "BAD_VALUE",
+    "BASELINE_UNREADABLE",
+    "DEFAULT_MARGIN",
+    "DUPLICATE_FOCAL",
+    "DUPLICATE_LENS",
+    "FILE_CODES",
+    "FOLD_IN_IMAGE",
+    "FOLD_NEAR_IMAGE",
+    "FOLD_OUTSIDE_IMAGE",
+    "HISTORY_DEPTH",
+    "MESSAGE_LIMIT",
+    "MISSING_ATTRIBUTE",
+    "NAME_LIMIT",
+    "NO_LENS",
+    "NOT_A_DATABASE",
+    "NOT_COMPUTABLE",
+    "QUOTED_LIMIT",
+    "SEVERITIES",
+    "SEVERITY_ERROR",
+    "SEVERITY_NOTICE",
+    "SEVERITY_WARNING",
+    "UNKNOWN_MODEL",
+    "UNREADABLE",
+    "XML_ERROR",
+    "CheckError",
+    "CheckResult",
+    "CheckedFile",
+    "Finding",
+    "GitOrigin",
+    "Identified",
+    "Source",
+    "analyse",
+    "baseline_sources",
+    "check",
+    "describe",
+    "entry_key",
+    "fix_suggestion",
+    "sources_from_git",
+    "sources_from_paths",
+]
+
+
+def check(
+    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None,
+    baseline: str | os.PathLike[str] | None = None,
+    margin: float = DEFAULT_MARGIN,
+    verbose: bool = False,
+) -> CheckResult:
+    """Check a Lensfun database: directories and/or XML files, where a Lensfun
+    checkout means its ``data/db``; None: the checkout around the working
+    directory, else the database bundled with lensfunpy.
+
+    ``baseline``
+    is an existing directory or file, or else a git revision of the
+    repository holding the paths. ``margin`` (>= 1) is the r_normalized
+    below which a fold outside the image is a warning; ``verbose`` adds the
+    notices about folds. Raises :class:`lensaudit.loader.LoadError`
+    (:class:`CheckError` included) when the input or the baseline cannot be
+    read at all.
+    """
+    if not margin >= 1 or math.isinf(margin):
+        raise CheckError(f"margin {margin} must be a finite number >= 1")
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    # resolve() maps a Lensfun checkout to its data/db (database.database_directory),
+    # for the baseline too, which is read at the same paths.
+    source = database.resolve(list(paths) if paths else None)
+    sources = sources_from_paths(source.paths)
+    if all(s.data is None for s in sources):
+        raise CheckError(
+            "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
+        )
+    # inputs -> parsing -> findings (-> matching, with a baseline) -> CheckResult
+    read = [parse_source(s) for s in sources]
+    files, current = analyse_parsed(read, margin, verbose)
+    if baseline is None:
+        return CheckResult(source.label, None, margin, files, [c.finding for c in current])
+    label = os.fspath(baseline)
+    before_read = [parse_source(s) for s in baseline_sources(label, source.paths)]
+    before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH)
+    _, before = analyse_parsed(before_read, margin, verbose)
+    findings, resolved = compare(current, before + kept, read, incomparable)
+    notices = baseline_notices(read, label, replaced, incomparable)
+    if notices:
+        order = {f.source.display: index for index, f in enumerate(read)}
+        findings = sorted(notices + findings, key=lambda f: (order.get(f.file, len(read)), f.line))
+    return CheckResult(source.label, label, margin, files, findings, resolved)

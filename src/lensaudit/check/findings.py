@@ -1,0 +1,277 @@
+"""The rules: from parsed files to findings, each with the identities that
+match it against a baseline's (:class:`lensaudit.check.result.Identified`).
+
+Input problems and folds of the distortion entries, the vignetting and TCA
+audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import calibrations, loader
+from ..metrics import is_circular_fisheye
+from .duplicates import duplicate_focals, duplicate_lenses
+from .inputs import Source
+from .matching import calibration_content, entry_content, file_identified, lens_identity
+from .parsing import ParsedSource, parse_source
+from .result import (
+    BAD_VALUE,
+    DEFAULT_MARGIN,
+    FOLD_IN_IMAGE,
+    FOLD_NEAR_IMAGE,
+    FOLD_OUTSIDE_IMAGE,
+    MISSING_ATTRIBUTE,
+    NO_LENS,
+    NOT_A_DATABASE,
+    NOT_COMPUTABLE,
+    SEVERITY_ERROR,
+    SEVERITY_NOTICE,
+    SEVERITY_WARNING,
+    UNKNOWN_MODEL,
+    UNREADABLE,
+    CheckedFile,
+    Finding,
+    Identified,
+    clip,
+    clip_key,
+    entry_finding,
+    entry_key,
+)
+
+_STATUS_CODES = {
+    loader.STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
+    loader.STATUS_BAD_VALUE: BAD_VALUE,
+    loader.STATUS_UNKNOWN_MODEL: UNKNOWN_MODEL,
+    loader.STATUS_NO_LENS: NO_LENS,
+    loader.STATUS_UNREADABLE: UNREADABLE,
+    loader.STATUS_NOT_DATABASE: NOT_A_DATABASE,
+}
+
+
+def analyse(
+    sources: Sequence[Source], margin: float = DEFAULT_MARGIN, verbose: bool = False
+) -> tuple[list[CheckedFile], list[Identified]]:
+    """Files and findings of one database, each finding with what matches it
+    against a baseline's (see :class:`Identified`)."""
+    return analyse_parsed([parse_source(source) for source in sources], margin, verbose)
+
+
+def analyse_parsed(
+    read: Sequence[ParsedSource], margin: float, verbose: bool
+) -> tuple[list[CheckedFile], list[Identified]]:
+    """:func:`analyse` of files already parsed; findings in file and line order."""
+    files = [
+        CheckedFile(
+            f.source.display, f.source.path, len(f.entries), f.problem.message if f.problem else ""
+        )
+        for f in read
+    ]
+    ordered: list[tuple[tuple[int, int, int], Identified]] = []
+
+    def add(file_index: int, item: Identified) -> None:
+        ordered.append(((file_index, item.finding.line, len(ordered)), item))
+
+    for index, file in enumerate(read):
+        if file.problem is not None:
+            add(index, file_identified(file))
+
+    entries = [
+        (index, entry)
+        for index, file in enumerate(read)
+        if file.problem is None
+        for entry in file.entries
+    ]
+    metrics = _metrics([entry for _, entry in entries])
+    for position, (index, entry) in enumerate(entries):
+        if entry.status != loader.STATUS_OK:
+            code = _STATUS_CODES.get(entry.status, BAD_VALUE)
+            finding = entry_finding(SEVERITY_ERROR, code, entry, entry.message)
+        else:
+            finding = _fold_finding(entry, metrics[position], margin, verbose)
+            if finding is None:
+                continue
+        content = (finding.severity, finding.code, entry_content(entry))
+        # The lens by name first; then by content alone, for a renamed lens.
+        keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
+        add(index, Identified(finding, keys, (read[index].source.file_name,)))
+
+    for index, item in calibration_findings(read, verbose):
+        add(index, item)
+    for index, item in duplicate_focals(read):
+        add(index, item)
+    for index, item in duplicate_lenses(read):
+        add(index, item)
+    ordered.sort(key=lambda pair: pair[0])
+    return files, [item for _, item in ordered]
+
+
+@dataclass(frozen=True)
+class _EntryMetrics:
+    r_max: float
+    d_max: float
+    r_corner: float
+    r_normalized: float
+    problem: str = ""
+
+
+def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics]:
+    """r_max and the rest for each entry; entry by entry if the batch fails."""
+    from ..pipeline import audit_entries
+
+    def batch(chunk: list[loader.DistortionEntry]) -> list[_EntryMetrics]:
+        with np.errstate(all="ignore"):
+            m = audit_entries(chunk).metrics
+        return [
+            _EntryMetrics(*values)
+            for values in zip(
+                m.r_max.tolist(),
+                m.d_max.tolist(),
+                m.r_corner.tolist(),
+                m.r_normalized.tolist(),
+                strict=True,
+            )
+        ]
+
+    try:
+        return batch(entries)
+    except Exception:  # noqa: BLE001 - one bad entry must not hide the others' findings
+        pass
+    results = []
+    for entry in entries:
+        try:
+            results.extend(batch([entry]))
+        except Exception as error:  # noqa: BLE001
+            nan = math.nan
+            results.append(_EntryMetrics(nan, nan, nan, nan, f"{type(error).__name__}: {error}"))
+    return results
+
+
+def _fold_finding(
+    entry: loader.DistortionEntry, m: _EntryMetrics, margin: float, verbose: bool
+) -> Finding | None:
+    if m.problem or m.r_max != m.r_max:
+        reason = m.problem or "the solver returned no value"
+        return entry_finding(
+            SEVERITY_ERROR, NOT_COMPUTABLE, entry, f"r_max could not be computed ({reason})"
+        )
+    if math.isinf(m.r_max):
+        return None
+    if m.r_max == 0:
+        return entry_finding(
+            SEVERITY_ERROR,
+            FOLD_IN_IMAGE,
+            entry,
+            "D(r) decreases from the image centre (D'(0) <= 0): the model folds back at once",
+        )
+    image = "image circle" if is_circular_fisheye(entry.lens, entry.type) else "image corner"
+    where = (
+        f"D(r) peaks at D(r_max) = {m.d_max:.4g} for r_max = {m.r_max:.4g}, "
+        f"{m.r_normalized:.3f} times the {image} {m.r_corner:.4g} (Hugin units)"
+    )
+    if m.r_normalized < 1:
+        return entry_finding(
+            SEVERITY_ERROR,
+            FOLD_IN_IMAGE,
+            entry,
+            f"the model folds back inside its own image: {where}; "
+            f"undistortion mirrors pixels beyond that radius; {fix_suggestion(entry)}",
+        )
+    if m.r_normalized < margin:
+        return entry_finding(
+            SEVERITY_WARNING,
+            FOLD_NEAR_IMAGE,
+            entry,
+            f"the model folds back just outside its image, within the margin {margin:g}: {where}",
+        )
+    if verbose:
+        return entry_finding(
+            SEVERITY_NOTICE,
+            FOLD_OUTSIDE_IMAGE,
+            entry,
+            f"the model folds back outside its image: {where}",
+        )
+    return None
+
+
+def fix_suggestion(entry: loader.DistortionEntry) -> str:
+    """The ``lensaudit fix`` command that refits this entry, on the same database.
+
+    The lens name goes in double quotes (single-quoted text is what messages
+    shorten), with the characters a POSIX shell expands there escaped.
+    """
+    lens = re.sub(r'([\\"$`])', r"\\\1", entry.lens)
+    return f'`lensaudit fix --lens "{lens}" --focal {entry.focal:g}` refits it'
+
+
+def calibration_findings(
+    read: Sequence[ParsedSource], verbose: bool
+) -> Iterable[tuple[int, Identified]]:
+    """Findings of the vignetting and TCA audits in the files that parsed.
+
+    Their identity is content, as for distortion entries: the kind, the
+    entry's own values, then its lens by name.
+    """
+    from .. import tca, vignetting
+
+    shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
+    for kind, module in ((calibrations.VIGNETTING, vignetting), (calibrations.TCA, tca)):
+        owners = [
+            index
+            for index, file in enumerate(read)
+            if file.problem is None
+            for _ in file.calibrations.get(kind, ())
+        ]
+        entries = [
+            entry
+            for file in read
+            if file.problem is None
+            for entry in file.calibrations.get(kind, ())
+        ]
+        if not entries:
+            continue
+        with np.errstate(all="ignore"):
+            audit = module.audit_entries(entries)
+        severities = audit.metrics["severity"].tolist()
+        for position, entry in enumerate(entries):
+            if entry.status == loader.STATUS_OK:
+                if severities[position] not in shown:
+                    continue
+            elif entry.status not in calibrations.STATUS_CODES:
+                continue
+            record = _calibration_record(audit, position)
+            for severity, code, _, _, message in module.findings([record]):
+                finding = Finding(
+                    severity,
+                    code,
+                    entry.file,
+                    entry.line,
+                    0,
+                    clip(message),
+                    clip_key(entry_key(entry)),  # the same fields as a distortion entry's
+                )
+                content = (severity, code, kind, calibration_content(entry))
+                keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
+                index = owners[position]
+                yield index, Identified(finding, keys, (read[index].source.file_name,))
+
+
+def _calibration_record(audit: calibrations.CalibrationAudit, position: int) -> dict:
+    """One entry of a vignetting or TCA audit as the dict its ``records()`` gives."""
+    entry = audit.entries[position]
+    ok = entry.status == loader.STATUS_OK
+    record = {}
+    for name in audit.COLUMNS:
+        if name not in audit.METRIC_COLUMNS:
+            record[name] = getattr(entry, name)
+        elif name in audit.BOOL_COLUMNS:
+            record[name] = bool(audit.metrics[name][position]) if ok else None
+        else:
+            value = audit.metrics[name][position]
+            record[name] = value.item() if hasattr(value, "item") else value
+    return record

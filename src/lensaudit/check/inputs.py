@@ -1,0 +1,205 @@
+"""The first stage of a check: what is checked and what it is compared with.
+
+The database's files are read from disk into :class:`Source` records; a
+baseline is a directory, or a git revision read with ``git ls-tree`` and
+``git cat-file`` (:mod:`lensaudit.git`), so that the work tree is never
+touched.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from .. import git as gitlayer
+from .. import loader
+from .result import CheckError
+
+#: How many commits that changed a file are searched for a version that parses,
+#: when the baseline's version does not.
+HISTORY_DEPTH = 50
+
+
+@dataclass(frozen=True)
+class GitOrigin:
+    """Where a file of a git baseline comes from: repository, commit, path in it."""
+
+    repository: Path
+    commit: str
+    path: str
+
+
+@dataclass(frozen=True)
+class Source:
+    """The bytes of one database file, wherever they come from.
+
+    ``name`` identifies the file across revisions (relative to the database
+    path given), ``display`` is how it is shown, ``path`` is where it is on
+    disk (None for a file read from git, which has an ``origin`` instead).
+    ``data`` is None when the file could not be read, and ``error`` says why.
+    """
+
+    name: str
+    display: str
+    path: Path | None
+    data: bytes | None
+    error: str = ""
+    origin: GitOrigin | None = None
+
+    @property
+    def file_name(self) -> str:
+        """The name without directories: what matches a file across revisions."""
+        return Path(self.name).name
+
+
+def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
+    """The XML files that directories and files designate, read into memory.
+
+    Files of a directory (``*.xml`` directly inside it) are named relative to
+    it. Raises :class:`CheckError` for a path that does not exist and a
+    directory without XML files; a file that cannot be read becomes a
+    :class:`Source` without data.
+    """
+    sources: list[Source] = []
+    seen: set[Path] = set()
+    for given in map(Path, paths):
+        if given.is_dir():
+            try:
+                files = loader.xml_files(given)
+            except OSError as error:
+                raise CheckError(
+                    f"{given}: cannot list directory: {error.strerror or error}"
+                ) from None
+            if not files:
+                raise CheckError(
+                    f"{given}: directory holds no *.xml files "
+                    f"(a Lensfun database is a directory of XML files)"
+                )
+            targets = [(file, file.name, loader.display_path(file)) for file in files]
+        elif given.exists():
+            targets = [(given, str(given), loader.display_path(given))]
+        else:
+            raise CheckError(f"{given}: no such file or directory")
+        for file, name, display in targets:
+            resolved = file.resolve()
+            if resolved in seen:
+                continue
+            seen.add(resolved)
+            try:
+                data, error = loader.read_regular_file(file), ""
+            except OSError as os_error:
+                data, error = None, f"cannot read file: {os_error.strerror or os_error}"
+            sources.append(Source(name, display, resolved, data, error))
+    return sources
+
+
+def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> list[Source]:
+    """The baseline's files: ``baseline`` itself if it exists on disk, else the
+    same ``paths`` at git revision ``baseline``."""
+    if Path(baseline).exists():
+        return sources_from_paths([baseline])
+    return sources_from_git(paths, baseline)
+
+
+def _git_call(call, *arguments):
+    """``call(*arguments)`` of :mod:`lensaudit.git`; git that cannot run at all
+    is a :class:`CheckError`."""
+    try:
+        return call(*arguments)
+    except gitlayer.GitUnavailable as error:
+        raise CheckError(f"cannot run git to read the baseline: {error}") from None
+
+
+def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> list[Source]:
+    """The files ``paths`` designate, as they are at git ``revision``.
+
+    Read with ``git ls-tree`` and ``git cat-file --batch`` from the
+    repository holding each path, without touching its work tree or index.
+    A path that did not exist at that revision contributes no file.
+    """
+    sources: list[Source] = []
+    for given in map(Path, paths):
+        directory = given if given.is_dir() else given.parent
+        try:
+            top = _git_call(gitlayer.top_level, directory)
+        except gitlayer.GitError:
+            raise CheckError(
+                f"--baseline {revision}: not an existing directory, and "
+                f"{given} is not inside a git repository"
+            ) from None
+        try:
+            commit = _git_call(gitlayer.resolve_commit, top, revision)
+        except gitlayer.GitError:
+            raise CheckError(
+                f"--baseline {revision}: not an existing directory, nor a "
+                f"revision of the git repository at {top}"
+            ) from None
+        relative = Path(os.path.relpath(given.resolve(), top.resolve())).as_posix()
+        if given.is_dir():
+            spec = [] if relative == "." else [relative + "/"]
+        else:
+            spec = [relative]
+        try:
+            listing = _git_call(gitlayer.list_tree, top, commit, spec)
+        except gitlayer.GitError as error:
+            raise CheckError(f"--baseline {revision}: cannot list {given}: {error}") from None
+        blobs = []
+        for item in listing:
+            if item.type != "blob" or item.mode not in ("100644", "100755"):
+                continue
+            filename = item.path.rsplit("/", 1)[-1]
+            if given.is_dir() and not filename.lower().endswith(".xml"):
+                continue
+            name = filename if given.is_dir() else str(given)
+            blobs.append((name, item.oid, item.path))
+        blobs.sort()
+        try:
+            contents = _cat_file([oid.encode() for _, oid, _ in blobs], top)
+        except gitlayer.GitError as error:
+            raise CheckError(f"--baseline {revision}: cannot read {given}: {error}") from None
+        for (name, _, repository_path), data in zip(blobs, contents, strict=True):
+            if data is None:
+                raise CheckError(f"--baseline {revision}: cannot read {name}: object missing")
+            origin = GitOrigin(top, commit, repository_path)
+            sources.append(Source(name, f"{revision}:{name}", None, data, origin=origin))
+    return sources
+
+
+def _cat_file(objects: list[bytes], repository: Path) -> list[bytes | None]:
+    """Contents of the given blobs (ids or ``rev:path``), through one
+    ``git cat-file --batch``; None for an object that does not exist or is
+    not a blob."""
+    return [
+        answer[2] if answer is not None and answer[1] == "blob" else None
+        for answer in _git_call(lambda: list(gitlayer.objects(repository, objects)))
+    ]
+
+
+def last_readable(source: Source, depth: int = HISTORY_DEPTH) -> tuple[Source, str] | None:
+    """The newest version of a git baseline's file that parses, among the last
+    ``depth`` commits that changed it, and that commit's id."""
+    from lxml import etree
+
+    origin = source.origin
+    if origin is None:
+        return None
+    try:
+        commits = _git_call(gitlayer.log, origin.repository, origin.commit, origin.path, depth)
+        contents = _cat_file([f"{c}:{origin.path}".encode() for c in commits], origin.repository)
+    except (gitlayer.GitError, UnicodeDecodeError):
+        return None
+    tried: set[bytes] = {source.data or b""}
+    for commit, data in zip(commits, contents, strict=True):
+        if data is None or data in tried:
+            continue
+        tried.add(data)
+        try:
+            root = etree.fromstring(data, loader.make_parser())
+        except etree.XMLSyntaxError:
+            continue
+        if etree.QName(root).localname != loader.DATABASE_ROOT:
+            continue
+        return replace(source, data=data, origin=replace(origin, commit=commit)), commit
+    return None

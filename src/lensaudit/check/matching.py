@@ -1,0 +1,188 @@
+"""Matching against the baseline: what makes two findings the same, which of
+the current findings the baseline already has, and which of its findings are
+gone.
+
+Identity is content, never position or line: an entry is its lens (maker and
+model, compared without case or white space) and its own values.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Hashable, Sequence
+from dataclasses import fields, replace
+
+from .. import loader
+from .inputs import last_readable
+from .parsing import ParsedSource, parse_source
+from .result import (
+    BASELINE_UNREADABLE,
+    FILE_CODES,
+    SEVERITY_NOTICE,
+    Finding,
+    Identified,
+    clip,
+    none_if_nan,
+)
+
+
+def identity_name(text: str) -> str:
+    """A maker or model name as identities compare it: without case or any
+    white space, so that "RF200-800mm" and "RF 200-800mm" are one lens."""
+    return "".join(text.split()).casefold()
+
+
+def lens_identity(maker: str, model: str) -> tuple[str, str]:
+    """A lens as identities compare it: maker and model, see :func:`identity_name`."""
+    return identity_name(maker), identity_name(model)
+
+
+_LINE_NUMBER = re.compile(r"\bline \d+")
+
+
+def entry_content(entry: loader.DistortionEntry) -> tuple:
+    """An entry's own values, without its lens's name, file or line."""
+    message = "" if entry.status == loader.STATUS_OK else _LINE_NUMBER.sub("line", entry.message)
+    return (
+        entry.model,
+        entry.type,
+        entry.status,
+        message,
+        *(
+            none_if_nan(getattr(entry, name))
+            for name in ("focal", "crop_factor", "aspect_ratio", "real_focal")
+        ),
+        *(none_if_nan(getattr(entry, name)) for name in ("a", "b", "c", "k1", "k2")),
+    )
+
+
+_CALIBRATION_SKIPPED = frozenset({"file", "line", "maker", "lens"})
+
+
+def calibration_content(entry: object) -> tuple:
+    """A vignetting or TCA record's own values, without its lens's name, file
+    or line (NaN as None, line numbers left out of the message)."""
+    values = []
+    for item in fields(entry):  # type: ignore[arg-type]
+        if item.name in _CALIBRATION_SKIPPED:
+            continue
+        value = getattr(entry, item.name)
+        if item.name == "message":
+            value = _LINE_NUMBER.sub("line", value)
+        elif isinstance(value, float):
+            value = none_if_nan(value)
+        values.append(value)
+    return tuple(values)
+
+
+def file_identified(file: ParsedSource) -> Identified:
+    """A file-level finding: the file's name and the problem, without its position."""
+    problem = file.problem
+    assert problem is not None
+    identity = (problem.severity, problem.code, file.source.file_name, file.problem_text)
+    return Identified(problem, (identity,), (file.source.file_name,))
+
+
+def readable_baseline(
+    read: list[ParsedSource], depth: int
+) -> tuple[list[ParsedSource], list[Identified], list[tuple[str, str]], set[str]]:
+    """The baseline's files with each one that cannot be parsed replaced by its
+    last readable version from git, among the last ``depth`` commits that
+    changed it.
+
+    Also returns the file-level findings of the replaced files (the baseline
+    had them, whatever the older version holds), the (name, commit) of each
+    replacement, and the names of files left without a readable version.
+    """
+    read = list(read)
+    kept: list[Identified] = []
+    replaced: list[tuple[str, str]] = []
+    incomparable: set[str] = set()
+    for index, file in enumerate(read):
+        if file.problem is None:
+            continue
+        older = last_readable(file.source, depth)
+        if older is None:
+            incomparable.add(file.source.file_name)
+            continue
+        kept.append(file_identified(file))
+        read[index] = parse_source(older[0])
+        replaced.append((file.source.file_name, older[1]))
+    return read, kept, replaced, incomparable
+
+
+def compare(
+    current: list[Identified],
+    before: list[Identified],
+    read: Sequence[ParsedSource],
+    incomparable: set[str],
+) -> tuple[list[Finding], int]:
+    """The current findings with those the baseline has marked known, and the
+    number of the baseline's findings that are gone (resolved).
+
+    Matching goes from the most specific key to the least: first every
+    finding that has an unmatched baseline finding with its first key, then
+    those left by their second key, and so on; each baseline finding matches
+    once. Findings in a file whose baseline could not be read are known too,
+    but for its own file-level finding.
+    """
+    used = [False] * len(before)
+    known = [False] * len(current)
+    tiers = max((len(item.keys) for item in (*current, *before)), default=0)
+    for tier in range(tiers):
+        pool: dict[Hashable, list[int]] = {}
+        for position, item in enumerate(before):
+            if not used[position] and tier < len(item.keys):
+                pool.setdefault(item.keys[tier], []).append(position)
+        for position, item in enumerate(current):
+            if known[position] or tier >= len(item.keys):
+                continue
+            candidates = pool.get(item.keys[tier])
+            if candidates:
+                used[candidates.pop(0)] = True
+                known[position] = True
+    for position, item in enumerate(current):
+        if item.finding.code not in FILE_CODES and incomparable.intersection(item.names):
+            known[position] = True
+    findings = [
+        replace(item.finding, known=True) if is_known else item.finding
+        for item, is_known in zip(current, known, strict=True)
+    ]
+    # Entries of a file that no longer parses are not checked: their findings
+    # are not gone, only unseen.
+    unseen = {f.source.file_name for f in read if f.problem is not None}
+    resolved = sum(
+        not used[position] and not unseen.intersection(item.names)
+        for position, item in enumerate(before)
+    )
+    return findings, resolved
+
+
+def baseline_notices(
+    read: Sequence[ParsedSource],
+    label: str,
+    replaced: list[tuple[str, str]],
+    incomparable: set[str],
+) -> list[Finding]:
+    """A notice for each readable file whose baseline version could not be parsed."""
+    readable = {f.source.file_name: f.source.display for f in read if f.problem is None}
+    notices = []
+    for name, commit in replaced:
+        if name in readable:
+            text = (
+                f"the baseline's version ({label}) could not be parsed; compared with the "
+                f"last version that can, of commit {commit[:12]}"
+            )
+            notices.append(
+                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
+            )
+    for name in sorted(incomparable):
+        if name in readable:
+            text = (
+                f"the baseline's version ({label}) could not be parsed, and no earlier "
+                f"version that can was found: the findings in this file are not counted as new"
+            )
+            notices.append(
+                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
+            )
+    return [replace(n, message=clip(n.message)) for n in notices]
