@@ -558,8 +558,8 @@ def test_the_short_path_gives_the_record_the_full_examination_gives(model, attri
     spec = calibrations.SPECS["vignetting"]
     context = calibrations.loader.lens_context(None)
     context.problem = ""  # a lens without problems
-    fast = calibrations._entry(spec, element, "x.xml", context)
-    full = calibrations._checked_entry(spec, element, "x.xml", context)
+    fast = calibrations._row(spec, element, calibrations._lens_of(context), context)
+    full = calibrations._checked_row(spec, element, context)
     assert repr(fast) == repr(full)
 
 

@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
+from operator import attrgetter, itemgetter
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from . import loader
 from .loader import (
@@ -127,6 +128,14 @@ class _Spec:
     # record fields between "focal" and "status", in order
     fields: tuple[str, ...]
 
+    @property
+    def row_fields(self) -> tuple[str, ...]:
+        """The names of a row's values (see :data:`CalibrationRow`)."""
+        return (*_HEAD_FIELDS, *self.fields, "status", "message")
+
+
+#: The fields every record starts with, after ``file``.
+_HEAD_FIELDS = ("line", "maker", "lens", "type", "crop_factor", "aspect_ratio", "model", "focal")
 
 SPECS = {
     VIGNETTING: _Spec(
@@ -150,144 +159,250 @@ SPECS = {
 #: Model names each kind can audit.
 MODELS = {kind: tuple(spec.models) for kind, spec in SPECS.items()}
 
+#: A record as a plain tuple: the fields of its entry class after ``file``
+#: (see :attr:`_Spec.row_fields`). A database has tens of thousands of
+#: ``<vignetting>`` elements; rows are cheap to make and to turn into columns.
+CalibrationRow = tuple
+
+
+class _Fast(NamedTuple):
+    """The short path of one (kind, model): the attributes read, in order, the
+    text each defaults to (None: required), and the getter of ``focal`` and
+    the record fields from their values (with NaN appended at the end)."""
+
+    names: tuple[str, ...]
+    defaults: tuple[str | None, ...]
+    layout: Callable[[list[float]], tuple[float, ...]]
+
+
+def _fast(spec: _Spec, model: str) -> _Fast:
+    coefficients = spec.models[model]
+    names = spec.required + tuple(coefficients)
+    defaults = (None,) * len(spec.required) + tuple(repr(v) for v in coefficients.values())
+    missing = len(names)  # the index of the NaN appended to the values
+    wanted = ("focal", *spec.fields)
+    return _Fast(
+        names, defaults, itemgetter(*(names.index(n) if n in names else missing for n in wanted))
+    )
+
+
+_FAST = {spec.tag: {model: _fast(spec, model) for model in spec.models} for spec in SPECS.values()}
+
+
+class _Numbers(dict[str, float]):
+    """float() of texts, each worked out once: a database repeats its focal
+    lengths, apertures, distances and often whole sets of coefficients."""
+
+    def __missing__(self, text: str) -> float:
+        value = self[text] = float(text)
+        return value
+
+
+def _row(
+    spec: _Spec,
+    element: etree._Element,
+    lens: tuple,
+    context: LensContext,
+    number: Callable[[str], float] = float,
+) -> CalibrationRow:
+    """The row of one element; ``lens`` is (maker, lens, type, crop factor, aspect
+    ratio) of ``context``, ``number`` is float() or a memo of it. The common
+    case (plain numbers) takes a short path; anything else is examined in
+    full by :func:`_checked_row`, to the same result."""
+    get = element.get
+    model = get("model")
+    fast = _FAST[spec.tag].get(model)  # type: ignore[arg-type]
+    if fast is not None and not context.problem:
+        texts = list(map(get, fast.names, fast.defaults))
+        if None not in texts:  # every required attribute is there
+            joined = "".join(texts)
+            # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
+            if joined.isascii() and "_" not in joined:
+                try:
+                    values = list(map(number, texts))
+                except ValueError:
+                    values = None
+                if values is not None:
+                    total = sum(values)
+                    # All finite, and the required ones (listed first) positive.
+                    if total - total == 0 and min(values[: len(spec.required)]) > 0:
+                        values.append(NAN)
+                        return (
+                            element.sourceline or 0,
+                            *lens,
+                            model,
+                            *fast.layout(values),
+                            STATUS_OK,
+                            "",
+                        )
+    return _checked_row(spec, element, context)
+
+
+def _checked_row(spec: _Spec, element: etree._Element, context: LensContext) -> CalibrationRow:
+    """The row of one element, every problem noted."""
+    required = [(attribute, None) for attribute in spec.required]
+    model, values, problems = loader.checked_attributes(element, required, spec.models, context)
+    return (
+        element.sourceline or 0,
+        *_lens_of(context),
+        model,
+        values.get("focal", NAN),
+        *[values.get(f, NAN) for f in spec.fields],
+        *status_of(problems),
+    )
+
+
+def _lens_of(context: LensContext) -> tuple:
+    return context.maker, context.lens, context.type, context.crop_factor, context.aspect_ratio
+
+
+def rows_from_tree(root: etree._Element) -> tuple[list[CalibrationRow], list[CalibrationRow]]:
+    """(vignetting, tca) rows for the elements under ``root``, in document order."""
+    found: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
+    specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
+    last = lens = None
+    number = _Numbers().__getitem__
+    # The lens context is the one the distortion loader gives a <distortion>.
+    for element, context in loader.elements_in_context(root, tuple(specs)):
+        if context is not last:
+            last, lens = context, _lens_of(context)
+        spec, out = specs[element.tag]
+        out.append(_row(spec, element, lens, context, number))
+    return found[VIGNETTING], found[TCA]
+
+
+class CalibrationRecords(Sequence[Any]):
+    """The records of one kind (``vignetting`` or ``tca``), held as rows.
+
+    A sequence of :class:`VignettingEntry` or :class:`TCAEntry` objects, each
+    made when it is asked for; :meth:`column` gives one field of every
+    record without making any.
+    """
+
+    def __init__(self, kind: str, names: list[str], rows: list[CalibrationRow]) -> None:
+        self.kind = kind
+        self._entry = SPECS[kind].entry
+        self._names = names  # the file of each row
+        self._rows = rows
+        self._columns: dict[str, list[Any]] = {}
+
+    @classmethod
+    def of_file(cls, kind: str, name: str, rows: list[CalibrationRow]) -> CalibrationRecords:
+        """The rows of one file, named ``name``."""
+        return cls(kind, [name] * len(rows), rows)
+
+    @classmethod
+    def of_entries(cls, kind: str, entries: Iterable[Any]) -> CalibrationRecords:
+        """Records made from entry objects of ``kind``."""
+        if isinstance(entries, CalibrationRecords):
+            return entries
+        getter = attrgetter("file", *SPECS[kind].row_fields)
+        values = [getter(entry) for entry in entries]
+        return cls(kind, [v[0] for v in values], [v[1:] for v in values])
+
+    @classmethod
+    def joined(cls, kind: str, parts: Iterable[CalibrationRecords]) -> CalibrationRecords:
+        """The records of ``parts``, one after the other."""
+        names: list[str] = []
+        rows: list[CalibrationRow] = []
+        for part in parts:
+            names += part._names
+            rows += part._rows
+        return cls(kind, names, rows)
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def __getitem__(self, index: Any) -> Any:
+        if isinstance(index, slice):
+            names, rows = self._names[index], self._rows[index]
+            return [self._entry(n, *r) for n, r in zip(names, rows, strict=True)]
+        return self._entry(self._names[index], *self._rows[index])
+
+    def __iter__(self) -> Iterator[Any]:
+        entry = self._entry
+        for name, row in zip(self._names, self._rows, strict=True):
+            yield entry(name, *row)
+
+    def __repr__(self) -> str:
+        return f"CalibrationRecords({self.kind!r}, {len(self)} records)"
+
+    def column(self, name: str) -> list[Any]:
+        """One field of every record, in order; kept, so callers must not change it."""
+        if name == "file":
+            return self._names
+        if not self._columns:
+            fields = SPECS[self.kind].row_fields
+            if self._rows:
+                columns = map(list, zip(*self._rows, strict=True))
+                self._columns = dict(zip(fields, columns, strict=True))
+            else:
+                self._columns = {field: [] for field in fields}
+        return self._columns[name]
+
+
+def entries_from_tree(
+    root: etree._Element, name: str
+) -> tuple[CalibrationRecords, CalibrationRecords]:
+    """(vignetting, tca) records for the elements under ``root``, in document order."""
+    vignetting, tca = rows_from_tree(root)
+    return (
+        CalibrationRecords.of_file(VIGNETTING, name, vignetting),
+        CalibrationRecords.of_file(TCA, name, tca),
+    )
+
 
 @dataclass(slots=True)
 class CalibrationLoad:
     """Records of every file, per kind, and the files they came from."""
 
-    vignetting: list[VignettingEntry] = field(default_factory=list)
-    tca: list[TCAEntry] = field(default_factory=list)
+    vignetting: CalibrationRecords
+    tca: CalibrationRecords
     files: list[SourceFile] = field(default_factory=list)
 
-    def entries(self, kind: str) -> list[Any]:
+    def entries(self, kind: str) -> CalibrationRecords:
         """The records of one kind (``vignetting`` or ``tca``)."""
         return self.vignetting if kind == VIGNETTING else self.tca
 
 
-def _record(
-    spec: _Spec,
-    name: str,
-    line: int,
-    context: LensContext,
-    model: str,
-    focal: float,
-    values: Iterable[float],
-) -> Any:
-    """A record of ``context``'s lens; ``values`` are those of ``spec.fields``."""
-    return spec.entry(
-        name,
-        line,
-        context.maker,
-        context.lens,
-        context.type,
-        context.crop_factor,
-        context.aspect_ratio,
-        model,
-        focal,
-        *values,
-    )
+def _error_row(spec: _Spec, line: int, status: str, message: str) -> CalibrationRow:
+    return (line, "", "", "", NAN, NAN, "", NAN, *(NAN,) * len(spec.fields), status, message)
 
 
-def _fast_layout(spec: _Spec, model: str) -> tuple[tuple[str, ...], list[int | None]]:
-    """(attributes read, in order) and, per record field after ``focal``, the
-    index of its value among them (None: NaN, not a field of this model)."""
-    names = spec.required + tuple(spec.models[model])
-    return names, [names.index(f) if f in names else None for f in spec.fields]
+def _marked(rows: list[CalibrationRow], status: str, message: str) -> list[CalibrationRow]:
+    """Rows given a file-level status; their own problems kept in front of ``message``."""
+    return [(*r[:-2], status, f"{r[-1]}; {message}" if r[-1] else message) for r in rows]
 
 
-_FAST = {
-    (spec.tag, model): _fast_layout(spec, model) for spec in SPECS.values() for model in spec.models
-}
+def read_rows(data: bytes) -> tuple[list[CalibrationRow], list[CalibrationRow], str]:
+    """(vignetting rows, tca rows, the file's error message or "") of one file.
 
-
-def _entry(spec: _Spec, element: etree._Element, name: str, context: LensContext) -> Any:
-    """The record of one element; the common case (plain numbers) takes a short path.
-
-    Anything else is examined in full by :func:`_checked_entry`.
-    """
-    attributes = dict(element.items())
-    model = attributes.get("model")
-    defaults = spec.models.get(model)  # type: ignore[arg-type]
-    if defaults is not None and not context.problem:
-        joined = "".join(attributes.values())
-        # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
-        if joined.isascii() and "_" not in joined:
-            try:
-                numbers = [float(attributes[n]) for n in spec.required]
-                numbers += [
-                    float(attributes[n]) if n in attributes else default
-                    for n, default in defaults.items()
-                ]
-            except (KeyError, ValueError):  # a missing required attribute, or not a number
-                numbers = None
-            if numbers is not None:
-                total = sum(numbers)
-                if total - total == 0 and min(numbers[: len(spec.required)]) > 0:  # all finite
-                    layout = _FAST[spec.tag, model][1]  # type: ignore[index]
-                    return _record(
-                        spec,
-                        name,
-                        element.sourceline or 0,
-                        context,
-                        model,  # type: ignore[arg-type]
-                        numbers[0],
-                        [NAN if i is None else numbers[i] for i in layout],
-                    )
-    return _checked_entry(spec, element, name, context)
-
-
-def _checked_entry(spec: _Spec, element: etree._Element, name: str, context: LensContext) -> Any:
-    """The record of one element, every problem noted."""
-    required = [(attribute, None) for attribute in spec.required]
-    model, values, problems = loader.checked_attributes(element, required, spec.models, context)
-    record = _record(
-        spec,
-        name,
-        element.sourceline or 0,
-        context,
-        model,
-        values.get("focal", NAN),
-        [values.get(f, NAN) for f in spec.fields],
-    )
-    record.status, record.message = status_of(problems)
-    return record
-
-
-def entries_from_tree(root: etree._Element, name: str) -> tuple[list[Any], list[Any]]:
-    """(vignetting, tca) records for the elements under ``root``, in document order."""
-    found: dict[str, list[Any]] = {VIGNETTING: [], TCA: []}
-    specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
-    # The lens context is the one the distortion loader gives a <distortion>.
-    for element, context in loader.elements_in_context(root, tuple(specs)):
-        spec, out = specs[element.tag]
-        out.append(_entry(spec, element, name, context))
-    return found[VIGNETTING], found[TCA]
-
-
-def _error_record(spec: _Spec, name: str, line: int, status: str, message: str) -> Any:
-    record = spec.entry(name, line, "", "", "", NAN, NAN, "", NAN)
-    record.status, record.message = status, message
-    return record
-
-
-def read_bytes(data: bytes, name: str) -> tuple[list[VignettingEntry], list[TCAEntry], str]:
-    """(vignetting records, tca records, the file's error message or "") of one file.
-
-    A file that is not well-formed XML gives an ``xml_error`` record at the
+    A file that is not well-formed XML gives an ``xml_error`` row at the
     error's line in both lists, then what libxml2's recovery mode can still
     read, each marked ``xml_error``; a file whose root is not
-    ``<lensdatabase>`` gives a ``not_database`` record, then its elements,
+    ``<lensdatabase>`` gives a ``not_database`` row, then its elements,
     each so marked.
     """
     parsed = loader.parse_file(data)
-    found = ([], []) if parsed.root is None else entries_from_tree(parsed.root, name)
+    found = ([], []) if parsed.root is None else rows_from_tree(parsed.root)
     if not parsed.error:
         return found[0], found[1], ""
     out = []
-    for kind, records in zip(KINDS, found, strict=True):
-        head = _error_record(SPECS[kind], name, parsed.line, parsed.status, parsed.error)
-        out.append([head, *loader.marked(records, parsed.status, parsed.entry_message)])
+    for kind, rows in zip(KINDS, found, strict=True):
+        head = _error_row(SPECS[kind], parsed.line, parsed.status, parsed.error)
+        out.append([head, *_marked(rows, parsed.status, parsed.entry_message)])
     return out[0], out[1], parsed.error
+
+
+def read_bytes(data: bytes, name: str) -> tuple[CalibrationRecords, CalibrationRecords, str]:
+    """(vignetting records, tca records, the file's error message or "") of one
+    file, as :func:`read_rows` reads it."""
+    vignetting, tca, error = read_rows(data)
+    return (
+        CalibrationRecords.of_file(VIGNETTING, name, vignetting),
+        CalibrationRecords.of_file(TCA, name, tca),
+        error,
+    )
 
 
 def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
@@ -295,19 +410,24 @@ def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
 
     A file that cannot be read gives an ``unreadable`` record in both lists.
     """
-    result = CalibrationLoad()
+    names: dict[str, list[str]] = {VIGNETTING: [], TCA: []}
+    rows: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
+    files = []
     for path, name in targets:
         path = Path(path).resolve()
         try:
-            vignetting, tca, error = read_bytes(loader.read_file(path), name)
+            vignetting, tca, error = read_rows(loader.read_file(path))
         except OSError as os_error:
             error = loader.unreadable_file(name, os_error)[1]
-            vignetting = [_error_record(SPECS[VIGNETTING], name, 0, STATUS_UNREADABLE, error)]
-            tca = [_error_record(SPECS[TCA], name, 0, STATUS_UNREADABLE, error)]
-        result.vignetting.extend(vignetting)
-        result.tca.extend(tca)
-        result.files.append(SourceFile(name, path, len(vignetting) + len(tca), error))
-    return result
+            vignetting = [_error_row(SPECS[VIGNETTING], 0, STATUS_UNREADABLE, error)]
+            tca = [_error_row(SPECS[TCA], 0, STATUS_UNREADABLE, error)]
+        for kind, found in ((VIGNETTING, vignetting), (TCA, tca)):
+            names[kind] += [name] * len(found)
+            rows[kind] += found
+        files.append(SourceFile(name, path, len(vignetting) + len(tca), error))
+    return CalibrationLoad(
+        *(CalibrationRecords(kind, names[kind], rows[kind]) for kind in KINDS), files
+    )
 
 
 def load(
@@ -575,14 +695,14 @@ class CalibrationAudit:
         self,
         source: Any,
         files: list[SourceFile],
-        entries: list[Any],
+        entries: Sequence[Any],
         metrics: dict[str, Any],
     ) -> None:
         self.source = source
         self.files = files
-        self.entries = entries
+        self.entries = CalibrationRecords.of_entries(self.kind, entries)
         self.metrics = metrics
-        self._audited = [e.status == STATUS_OK for e in entries]
+        self._audited = [status == STATUS_OK for status in self.entries.column("status")]
 
     @classmethod
     def of_entries(
@@ -591,35 +711,46 @@ class CalibrationAudit:
         source: Any = None,
         files: list[SourceFile] | None = None,
     ) -> Any:
-        """The audit of loaded records: :meth:`compute_audited` on those with
-        status ``ok``; the others' metrics are empty (NaN, False or "")."""
+        """The audit of loaded records (:class:`CalibrationRecords`, or entry
+        objects): :meth:`compute_audited` on those with status ``ok``; the
+        others' metrics are empty (NaN, False or "")."""
         import numpy as np
 
         from . import database
         from .metrics import is_circular_fisheye
 
-        size = len(entries)
-        ok = np.fromiter((e.status == STATUS_OK for e in entries), dtype=bool, count=size)
+        records = CalibrationRecords.of_entries(cls.kind, entries)
+        size = len(records)
+        ok = np.array(records.column("status"), dtype=object) == STATUS_OK
         rows = np.flatnonzero(ok)
-        audited = [entries[i] for i in rows]
+        take = itemgetter(*rows.tolist()) if rows.size > 1 else None
+
+        def values(name: str) -> list[Any]:
+            column = records.column(name)
+            if take is None:
+                return [column[i] for i in rows.tolist()]
+            return list(take(column))
 
         def floats(name: str) -> NDArray[np.float64]:
-            return np.fromiter((getattr(e, name) for e in audited), np.float64, rows.size)
+            return np.array(values(name), dtype=np.float64).reshape(rows.size)
 
-        circular = [is_circular_fisheye(e.lens, e.type) for e in audited]
+        # One answer per lens: a database has a few hundred lenses for its thousands of entries.
+        lenses = list(zip(values("lens"), values("type"), strict=True))
+        fisheye = {pair: is_circular_fisheye(*pair) for pair in set(lenses)}
+        circular = [fisheye[pair] for pair in lenses]
         metrics: dict[str, Any] = {}
-        for name, values in cls.compute_audited(audited, floats, circular).items():
+        for name, column in cls.compute_audited(values, floats, circular).items():
             if name in cls.BOOL_COLUMNS:
                 full = np.zeros(size, dtype=bool)
             elif name == "severity":
                 full = np.full(size, "", dtype=object)
             else:
                 full = np.full(size, np.nan)
-            full[rows] = values
+            full[rows] = column
             metrics[name] = full
         if source is None:
             source = database.DatabaseSource((), "entries given in memory")
-        return cls(source, files or [], list(entries), metrics)
+        return cls(source, files or [], records, metrics)
 
     @classmethod
     def from_load(cls, loaded: CalibrationLoad, source: Any = None) -> Any:
@@ -636,11 +767,13 @@ class CalibrationAudit:
 
     @staticmethod
     def compute_audited(
-        entries: list[Any], floats: Callable[[str], NDArray[np.float64]], circular: list[bool]
+        values: Callable[[str], list[Any]],
+        floats: Callable[[str], NDArray[np.float64]],
+        circular: list[bool],
     ) -> dict[str, Any]:
-        """The metric columns (numpy arrays) of audited records; ``floats(name)``
-        gives a field of every record as an array, ``circular`` says which
-        are circular fisheyes."""
+        """The metric columns (numpy arrays) of audited records; ``values(name)``
+        gives a field of every audited record as a list, ``floats(name)`` as a
+        float array, and ``circular`` says which are circular fisheyes."""
         raise NotImplementedError
 
     def __len__(self) -> int:
@@ -655,7 +788,7 @@ class CalibrationAudit:
         """One output column as a list: floats (NaN where empty), text, or
         booleans (None for entries that were not audited)."""
         if name not in self.METRIC_COLUMNS:
-            return [getattr(e, name) for e in self.entries]
+            return list(self.entries.column(name))
         values = self.metrics[name].tolist()
         if name in self.BOOL_COLUMNS:
             return [bool(v) if ok else None for v, ok in zip(values, self.audited, strict=True)]
@@ -685,8 +818,8 @@ class CalibrationAudit:
     def statuses(self) -> dict[str, int]:
         """Entries per status, ``ok`` first."""
         counts: dict[str, int] = {STATUS_OK: 0}
-        for entry in self.entries:
-            counts[entry.status] = counts.get(entry.status, 0) + 1
+        for status in self.entries.column("status"):
+            counts[status] = counts.get(status, 0) + 1
         return counts
 
     def severities(self) -> dict[str, int]:
@@ -725,7 +858,7 @@ class CalibrationAudit:
 
     def problem_lines(self, shown: int = 10) -> list[str]:
         """The entries that were not audited: the first ``shown``, then a count."""
-        problems = [e for e in self.entries if e.status != STATUS_OK]
+        problems = [self.entries[i] for i, ok in enumerate(self.audited) if not ok]
         if not problems:
             return []
         counts = ", ".join(f"{n} {s}" for s, n in self.statuses().items() if s != STATUS_OK)

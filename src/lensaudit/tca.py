@@ -130,14 +130,16 @@ class TCAAudit(CalibrationAudit):
 
     @staticmethod
     def compute_audited(
-        entries: list[Any], floats: Callable[[str], FloatArray], circular: list[bool]
+        values: Callable[[str], list[Any]],
+        floats: Callable[[str], FloatArray],
+        circular: list[bool],
     ) -> dict[str, NDArray[Any]]:
         """:func:`compute` of audited records, each judged over its image."""
         from .metrics import image_radius
 
         with np.errstate(all="ignore"):
             radius = image_radius(floats("aspect_ratio"), circular)
-        return compute([e.model for e in entries], *map(floats, COEFFICIENTS), radius)
+        return compute(values("model"), *map(floats, COEFFICIENTS), radius)
 
     def ratios(self) -> FloatArray:
         """Per entry: the nearer channel's r_fold over r_corner (below 1: folds inside)."""
@@ -174,9 +176,9 @@ class TCAAudit(CalibrationAudit):
     def summary(self) -> dict[str, Any]:
         summary = super().summary()
         models: dict[str, int] = {}
-        for entry, ok in zip(self.entries, self.audited, strict=True):
+        for model, ok in zip(self.entries.column("model"), self.audited, strict=True):
             if ok:
-                models[entry.model] = models.get(entry.model, 0) + 1
+                models[model] = models.get(model, 0) + 1
         folding = self.folding()
         nearest = self.nearest()
         summary.update(

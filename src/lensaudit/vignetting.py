@@ -265,7 +265,9 @@ class VignettingAudit(CalibrationAudit):
 
     @staticmethod
     def compute_audited(
-        entries: list[Any], floats: Callable[[str], FloatArray], circular: list[bool]
+        values: Callable[[str], list[Any]],
+        floats: Callable[[str], FloatArray],
+        circular: list[bool],
     ) -> dict[str, NDArray[Any]]:
         """:func:`compute` of audited records, each judged over its image."""
         radius = image_radius(floats("aspect_ratio"), circular)

@@ -220,30 +220,26 @@ def calibration_findings(
     from .. import tca, vignetting
 
     shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
+    parsed = [(index, file) for index, file in enumerate(read) if file.problem is None]
     for kind, module in ((calibrations.VIGNETTING, vignetting), (calibrations.TCA, tca)):
-        owners = [
-            index
-            for index, file in enumerate(read)
-            if file.problem is None
-            for _ in file.calibrations.get(kind, ())
-        ]
-        entries = [
-            entry
-            for file in read
-            if file.problem is None
-            for entry in file.calibrations.get(kind, ())
-        ]
-        if not entries:
+        parts = [file.calibrations[kind] for _, file in parsed if kind in file.calibrations]
+        records = calibrations.CalibrationRecords.joined(kind, parts)
+        if not records:
             continue
+        owners = [
+            index for index, file in parsed for _ in range(len(file.calibrations.get(kind, ())))
+        ]
         with np.errstate(all="ignore"):
-            audit = module.audit_entries(entries)
+            audit = module.audit_entries(records)
         severities = audit.metrics["severity"].tolist()
-        for position, entry in enumerate(entries):
-            if entry.status == loader.STATUS_OK:
+        # Entry objects only for the records with a finding: a database has tens of thousands.
+        for position, status in enumerate(records.column("status")):
+            if status == loader.STATUS_OK:
                 if severities[position] not in shown:
                     continue
-            elif entry.status not in calibrations.STATUS_CODES:
+            elif status not in calibrations.STATUS_CODES:
                 continue
+            entry = records[position]
             record = _calibration_record(audit, position)
             for severity, code, _, _, message in module.findings([record]):
                 finding = Finding(

@@ -36,7 +36,7 @@ class ParsedSource:
     lens_of_entry: list[int | None] | None = None  # index into ``lenses``, per entry
     lenses: tuple[LensRecord, ...] = ()
     # <vignetting> and <tca> records of a file that parsed, by kind
-    calibrations: dict[str, list] = field(default_factory=dict)
+    calibrations: dict[str, calibrations.CalibrationRecords] = field(default_factory=dict)
 
 
 _POSITION = re.compile(r",? ?(?:\(<string>, )?line (\d+), column (\d+)\)?\s*$")
