@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
+from .. import loader
 from .matching import entry_content, lens_identity
 from .parsing import LensRecord, ParsedSource, element_content
 from .result import (
@@ -35,7 +36,7 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
     for index, file in enumerate(read):
         if file.problem is not None or file.lens_of_entry is None:
             continue
-        first: dict[tuple, tuple[int, tuple]] = {}
+        first: dict[tuple, loader.DistortionEntry] = {}
         for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
             if lens is None or entry.focal != entry.focal:
                 continue
@@ -45,11 +46,12 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 none_if_nan(entry.aspect_ratio),
                 entry.focal,
             )
-            content = entry_content(entry)
-            if calibration not in first:
-                first[calibration] = (entry.line, content)
+            earlier = first.setdefault(calibration, entry)
+            if earlier is entry:
                 continue
-            first_line, first_content = first[calibration]
+            # Contents only for duplicates: a database has thousands of entries.
+            first_line, first_content = earlier.line, entry_content(earlier)
+            content = entry_content(entry)
             if content == first_content:
                 severity = SEVERITY_WARNING
                 text = (

@@ -93,7 +93,10 @@ def analyse_parsed(
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
             finding = entry_finding(SEVERITY_ERROR, code, entry, entry.message)
         else:
-            finding = _fold_finding(entry, metrics[position], margin, verbose)
+            entry_metrics = metrics[position]
+            if entry_metrics is None:
+                continue  # never folds
+            finding = _fold_finding(entry, entry_metrics, margin, verbose)
             if finding is None:
                 continue
         content = (finding.severity, finding.code, entry_content(entry))
@@ -120,23 +123,23 @@ class _EntryMetrics:
     problem: str = ""
 
 
-def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics]:
-    """r_max and the rest for each entry; entry by entry if the batch fails."""
+def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
+    """r_max and the rest for each entry, None where r_max is infinite; entry by
+    entry if the batch fails."""
     from ..pipeline import audit_entries
 
-    def batch(chunk: list[loader.DistortionEntry]) -> list[_EntryMetrics]:
+    def batch(chunk: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
         with np.errstate(all="ignore"):
             m = audit_entries(chunk).metrics
-        return [
-            _EntryMetrics(*values)
-            for values in zip(
-                m.r_max.tolist(),
-                m.d_max.tolist(),
-                m.r_corner.tolist(),
-                m.r_normalized.tolist(),
-                strict=True,
-            )
-        ]
+        values = zip(
+            m.r_max.tolist(),
+            m.d_max.tolist(),
+            m.r_corner.tolist(),
+            m.r_normalized.tolist(),
+            strict=True,
+        )
+        # None for the common case, a model that never folds: nothing to report.
+        return [None if v[0] == math.inf else _EntryMetrics(*v) for v in values]
 
     try:
         return batch(entries)

@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from ..check_formats import writer
 from .options import database_paths, fail, output_file, output_stream
+from .scan import _single_blas_thread
+
+if TYPE_CHECKING:
+    from ..check import CheckResult
 
 FORMAT_NAMES = ("text", "json", "github", "junit")
 
@@ -100,23 +107,39 @@ def check(
       1  at least one new error
       2  bad usage, or input or baseline that could not be read at all
     """
-    from ..check import CheckError
-    from ..check import check as run_check
-    from ..check_formats import writer
-    from ..loader import LoadError
-
     if not margin >= 1 or math.isinf(margin):
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
+    _single_blas_thread()  # before numpy is imported, with the check
+    collecting = gc.isenabled()
+    # What the check allocates lives until it ends: the cycle collector would
+    # only walk it over and over.
+    gc.disable()
+    try:
+        result = _run(paths, baseline, margin, verbose, output_format)
+        with output_stream(output) as stream:
+            writer(output_format)(result, stream)
+    finally:
+        if collecting:
+            gc.enable()
+    if result.failed:
+        raise SystemExit(EXIT_FINDINGS)
+
+
+def _run(
+    paths: tuple[Path, ...], baseline: str | None, margin: float, verbose: bool, output_format: str
+) -> CheckResult:
+    """The check's result, its paths as ``output_format`` shows them."""
+    from ..check import CheckError
+    from ..check import check as run_check
+    from ..loader import LoadError
+
     try:
         result = run_check(list(paths) or None, baseline=baseline, margin=margin, verbose=verbose)
     except (CheckError, LoadError) as error:
         fail(str(error))
     if output_format in ("github", "junit"):
         result = result.relative_to(*_repository_roots(paths))
-    with output_stream(output) as stream:
-        writer(output_format)(result, stream)
-    if result.failed:
-        raise SystemExit(EXIT_FINDINGS)
+    return result
 
 
 def _repository_roots(paths: tuple[Path, ...]) -> list[Path]:
