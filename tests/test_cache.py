@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 import lensaudit.cache as cache_module
 from conftest import lens_xml
+from damage import FLIPS, flipped
 from lensaudit import loader, pipeline, store
 from lensaudit.cache import ParseCache, cache_dir, pack_entries, unpack_entries
 from lensaudit.cli import main
@@ -305,15 +306,7 @@ def test_any_flipped_bytes_in_a_cache_with_rows_give_the_uncached_output(small_d
         scan_output([small_db], output_format, directory)
     path = the_cache_file(directory)
     original = path.read_bytes()
-    damaged = bytearray(original)
-    for position, mask in data.draw(
-        st.lists(
-            st.tuples(st.integers(0, len(original) - 1), st.integers(1, 255)),
-            min_size=1,
-            max_size=4,
-        )
-    ):
-        damaged[position] ^= mask
+    damaged = flipped(original, data.draw(FLIPS))
     path.write_bytes(damaged)
     for output_format in ("csv", "json"):
         assert scan_output([small_db], output_format, directory) == uncached[output_format]
@@ -445,17 +438,8 @@ def test_any_flipped_bytes_in_the_cache_file_give_the_uncached_audit(small_db, d
     directory = Path(os.environ["LENSAUDIT_CACHE_DIR"])
     uncached = snapshot(run(small_db, cache=False))
     path, original = primed_cache(small_db, directory)
-    damaged = bytearray(original)
-    flips = data.draw(
-        st.lists(
-            st.tuples(st.integers(0, len(original) - 1), st.integers(1, 255)),
-            min_size=1,
-            max_size=4,
-        )
-    )
-    for position, mask in flips:
-        damaged[position] ^= mask
-    if bytes(damaged) == original:  # two flips of one byte that cancel out
+    damaged = flipped(original, data.draw(FLIPS))
+    if damaged == original:  # two flips of one byte that cancel out
         return
     path.write_bytes(damaged)
     assert snapshot(run(small_db, cache=True)) == uncached

@@ -15,7 +15,6 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,11 +24,13 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from damage import FLIPS, flipped
 from lensaudit import loader
 from lensaudit.cli import main
 from lensaudit.history import (
     HISTORY_COLUMNS,
     INTRODUCED_COLUMNS,
+    History,
     HistoryError,
     audit_history,
     audit_revision,
@@ -524,47 +525,44 @@ def test_an_unusable_cache_directory_is_a_warning_not_an_error(repo, tmp_path):
     assert result.revisions and result.warnings and "not used" in result.warnings[0]
 
 
-def damaged(path: Path, flips: list[tuple[int, int]]) -> bool:
-    """Flip bits of a file's bytes (positions taken modulo its size); whether it changed."""
-    original = path.read_bytes()
-    data = bytearray(original)
-    for position, mask in flips:
-        data[position % len(data)] ^= mask
-    path.write_bytes(data)
-    return bytes(data) != original
+@pytest.fixture(scope="module")
+def uncached_csv(repo: Repository) -> tuple[str, str]:
+    return csv_text(audit_history(repo.path))
 
 
-FLIPS = st.lists(st.tuples(st.integers(0, 1 << 24), st.integers(1, 255)), min_size=1, max_size=4)
+def run_after_damage(repo: Repository, cache: Path, name: str, flips: list) -> History | None:
+    """A run of ``repo`` after a first one whose cache file ``name`` is then damaged
+    by ``flips`` (None when the flips cancel out). Unless ``history-run.cache``
+    is the one damaged, it is removed: the run is made from the blob audits."""
+    audit_history(repo.path, cache_dir=cache)
+    if name != "history-run.cache":
+        (cache / "history-run.cache").unlink()
+    original = (cache / name).read_bytes()
+    damaged = flipped(original, flips)
+    (cache / name).write_bytes(damaged)
+    return None if damaged == original else audit_history(repo.path, cache_dir=cache)
 
 
 @settings(max_examples=25, deadline=None)
 @given(flips=FLIPS)
-def test_damaged_blob_audits_give_the_uncached_history_and_are_rebuilt(repo, flips):
-    uncached = csv_text(audit_history(repo.path))
-    with tempfile.TemporaryDirectory() as directory:
-        cache = Path(directory)
-        audit_history(repo.path, cache_dir=cache)
-        (cache / "history-run.cache").unlink()  # the run must be made from the blob audits
-        if not damaged(cache / "history-blobs.cache", flips):
-            return
-        again = audit_history(repo.path, cache_dir=cache)
-        assert csv_text(again) == uncached and again.blobs_cached == 0
+def test_damaged_blob_audits_give_the_uncached_history_and_are_rebuilt(
+    repo, uncached_csv, tmp_path_factory, flips
+):
+    cache = tmp_path_factory.mktemp("cache")
+    again = run_after_damage(repo, cache, "history-blobs.cache", flips)
+    if again is not None:
+        assert csv_text(again) == uncached_csv and again.blobs_cached == 0
         (cache / "history-run.cache").unlink()
         rebuilt = audit_history(repo.path, cache_dir=cache)
-        assert rebuilt.blobs_cached == rebuilt.blobs and csv_text(rebuilt) == uncached
+        assert rebuilt.blobs_cached == rebuilt.blobs and csv_text(rebuilt) == uncached_csv
 
 
 @settings(max_examples=25, deadline=None)
 @given(flips=FLIPS)
-def test_a_damaged_last_run_gives_the_uncached_history(repo, flips):
-    uncached = csv_text(audit_history(repo.path))
-    with tempfile.TemporaryDirectory() as directory:
-        cache = Path(directory)
-        audit_history(repo.path, cache_dir=cache)
-        if not damaged(cache / "history-run.cache", flips):
-            return
-        again = audit_history(repo.path, cache_dir=cache)
-        assert csv_text(again) == uncached and again.blobs_parsed == 3  # the newest revision's
+def test_a_damaged_last_run_gives_the_uncached_history(repo, uncached_csv, tmp_path_factory, flips):
+    again = run_after_damage(repo, tmp_path_factory.mktemp("cache"), "history-run.cache", flips)
+    # Only the newest revision's files are parsed: the blob audits are whole.
+    assert again is None or (csv_text(again), again.blobs_parsed) == (uncached_csv, 3)
 
 
 def test_a_warm_run_gives_the_history_of_a_cold_one_field_by_field(repo, tmp_path):

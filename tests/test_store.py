@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from damage import FLIPS, flipped
 from lensaudit import store
 
 FINGERPRINT = b"test format 1"
@@ -59,23 +60,19 @@ def test_a_file_of_another_fingerprint_reads_as_none(tmp_path):
     assert other.read() is None
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.data())
-def test_any_flipped_bytes_read_as_none(tmp_path_factory, data):
-    directory = tmp_path_factory.mktemp("store")
+def written(directory: Path) -> tuple[store.RecordFile, bytes]:
+    """A store file holding VALUE, and its bytes."""
     file = record_file(directory)
     file.write(VALUE)
-    original = file.path.read_bytes()
-    damaged = bytearray(original)
-    for position, mask in data.draw(
-        st.lists(
-            st.tuples(st.integers(0, len(original) - 1), st.integers(1, 255)),
-            min_size=1,
-            max_size=4,
-        )
-    ):
-        damaged[position] ^= mask
-    if bytes(damaged) == original:  # flips of one byte that cancel out
+    return file, file.path.read_bytes()
+
+
+@settings(max_examples=200, deadline=None)
+@given(flips=FLIPS)
+def test_any_flipped_bytes_read_as_none(tmp_path_factory, flips):
+    file, original = written(tmp_path_factory.mktemp("store"))
+    damaged = flipped(original, flips)
+    if damaged == original:
         return
     file.path.write_bytes(damaged)
     assert file.read() is None
@@ -84,10 +81,7 @@ def test_any_flipped_bytes_read_as_none(tmp_path_factory, data):
 @settings(max_examples=100, deadline=None)
 @given(st.data())
 def test_any_truncation_reads_as_none(tmp_path_factory, data):
-    directory = tmp_path_factory.mktemp("store")
-    file = record_file(directory)
-    file.write(VALUE)
-    original = file.path.read_bytes()
+    file, original = written(tmp_path_factory.mktemp("store"))
     file.path.write_bytes(original[: data.draw(st.integers(0, len(original) - 1))])
     assert file.read() is None
 
