@@ -174,7 +174,9 @@ def test_worker_that_listed_some_files_leaves_the_others_to_the_scan(
     )
 
 
-def test_a_database_the_cache_has_met_is_left_to_the_scan(bundled_db, tmp_path, two_cpus, adoptions):
+def test_a_database_the_cache_has_met_is_left_to_the_scan(
+    bundled_db, tmp_path, two_cpus, adoptions
+):
     database = tmp_path / "db"
     shutil.copytree(bundled_db, database)
     output_of(["-f", "csv", str(database)])  # the cache now knows every file
@@ -205,3 +207,17 @@ def test_console_command_with_the_worker_matches_the_library(bundled_db):
     missing = subprocess.run([*command, "/no/such/db"], capture_output=True, timeout=120)
     assert missing.returncode == 2
     assert len(missing.stderr.decode().strip().splitlines()) == 1
+
+
+def test_worker_is_stopped_when_the_scan_fails_while_parsing(bundled_db, two_cpus, monkeypatch):
+    early.start(["--no-cache", str(bundled_db)])
+    pid = early._started.pid
+
+    def failing_import() -> None:
+        raise RuntimeError("numpy is broken")
+
+    monkeypatch.setattr("lensaudit.pipeline._metrics", failing_import)
+    with pytest.raises(RuntimeError, match="numpy is broken"):
+        run(bundled_db)
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)  # stopped and reaped, not left writing to nobody

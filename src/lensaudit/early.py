@@ -130,6 +130,11 @@ class Adopted:
             os.close(self.output)
             _reap(self.pid)
 
+    def abandon(self) -> None:
+        """Stop the worker, its results unread (call instead of :meth:`results`)."""
+        os.close(self.output)
+        _kill(self.pid)
+
 
 _started: _Worker | None = None
 
@@ -183,15 +188,19 @@ def stop() -> None:
 
 
 def _end(worker: _Worker) -> None:
-    import signal
-
     for end in (worker.queue, worker.results):
         os.close(end)
+    _kill(worker.pid)
+
+
+def _kill(pid: int) -> None:
+    import signal
+
     try:
-        os.kill(worker.pid, signal.SIGKILL)
+        os.kill(pid, signal.SIGKILL)
     except OSError:
         pass
-    _reap(worker.pid)
+    _reap(pid)
 
 
 def _reap(pid: int) -> None:

@@ -176,7 +176,8 @@ def _in_processes(
         for index in _take(queue, tasks):
             results[index] = parse(jobs[index])
         if adopted is not None:
-            for i, result in adopted.results().items():
+            found, adopted = adopted.results(), None
+            for i, result in found.items():
                 index = index_of.get(paths[i]) if 0 <= i < len(paths) else None
                 if index is not None:
                     results.setdefault(index, result)
@@ -188,6 +189,8 @@ def _in_processes(
     finally:
         os.close(queue)
         _stop(children)
+        if adopted is not None:  # not collected: this process failed meanwhile
+            adopted.abandon()
     # What a worker did not return (it failed, or was killed) is parsed here.
     return [results[i] if i in results else parse(jobs[i]) for i in range(len(jobs))]
 
