@@ -66,7 +66,7 @@ import os
 from collections.abc import Sequence
 
 from .. import database
-from .findings import analyse, analyse_parsed, fix_suggestion
+from .findings import analyse, analyse_parsed, fix_suggestion, prepare
 from .inputs import (
     HISTORY_DEPTH,
     GitOrigin,
@@ -76,7 +76,7 @@ from .inputs import (
     sources_from_paths,
 )
 from .matching import baseline_notices, compare, readable_baseline
-from .parsing import parse_source
+from .parsing import parse_sources
 from .result import (
     BAD_VALUE,
     BASELINE_UNREADABLE,
@@ -187,12 +187,12 @@ def check(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
     # inputs -> parsing -> findings (-> matching, with a baseline) -> CheckResult
-    read = [parse_source(s) for s in sources]
+    read = parse_sources(sources, meanwhile=prepare)
     files, current = analyse_parsed(read, margin, verbose)
     if baseline is None:
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
-    before_read = [parse_source(s) for s in baseline_sources(label, source.paths)]
+    before_read = parse_sources(baseline_sources(label, source.paths))
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH)
     _, before = analyse_parsed(before_read, margin, verbose)
     findings, resolved = compare(current, before + kept, read, incomparable)

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 from .. import loader
 from .matching import entry_content, lens_identity
-from .parsing import LensRecord, ParsedSource, element_content
+from .parsing import LensRecord, ParsedSource, element_content, lens_elements
 from .result import (
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
@@ -87,11 +87,16 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
     case and spacing of their names.
     """
     first: dict[tuple, tuple[ParsedSource, LensRecord]] = {}
-    contents: dict[int, tuple] = {}  # lens content by id(lens), computed for duplicates only
+    # Contents for duplicates only, from their files parsed again: they are rare.
+    elements: dict[int, list] = {}  # the <lens> elements of a file, by id(file)
+    contents: dict[int, tuple] = {}  # a lens's content, by id(lens)
 
-    def content_of(lens: LensRecord) -> tuple:
+    def content_of(file: ParsedSource, lens: LensRecord) -> tuple:
         if id(lens) not in contents:
-            contents[id(lens)] = element_content(lens.element, skip_names=True)
+            if id(file) not in elements:
+                elements[id(file)] = lens_elements(file.source)
+            element = elements[id(file)][lens.index]
+            contents[id(lens)] = element_content(element, skip_names=True)
         return contents[id(lens)]
 
     for index, file in enumerate(read):
@@ -102,7 +107,7 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
             earlier_file, earlier = first.setdefault(key, (file, lens))
             if earlier is lens:
                 continue
-            content = content_of(lens)
+            content = content_of(file, lens)
             where = f"{earlier_file.source.display}:{earlier.line}"
             crop = (
                 f"crop factor {lens.crop_factor:g}"
@@ -112,7 +117,7 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 else f"crop factor {clip(lens.crop_factor, 20)!r}"
             )
             name = lens_name(lens.maker, lens.model)
-            if content == content_of(earlier):
+            if content == content_of(earlier_file, earlier):
                 severity = SEVERITY_WARNING
                 text = f"lens {name} ({crop}) is defined identically at {where}: one can go"
             else:
@@ -138,7 +143,7 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 severity,
                 DUPLICATE_LENS,
                 lens.crop_factor,
-                *sorted((content, content_of(earlier)), key=repr),
+                *sorted((content, content_of(earlier_file, earlier)), key=repr),
             )
             keys = ((*pair, key), pair, (severity, DUPLICATE_LENS, key))
             names = (file.source.file_name, earlier_file.source.file_name)

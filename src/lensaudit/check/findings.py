@@ -12,14 +12,11 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from .. import calibrations, loader
-from ..metrics import is_circular_fisheye
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .matching import calibration_content, entry_content, file_identified, lens_identity
-from .parsing import ParsedSource, parse_source
+from .parsing import ParsedSource, parse_sources
 from .result import (
     BAD_VALUE,
     DEFAULT_MARGIN,
@@ -59,7 +56,13 @@ def analyse(
 ) -> tuple[list[CheckedFile], list[Identified]]:
     """Files and findings of one database, each finding with what matches it
     against a baseline's (see :class:`Identified`)."""
-    return analyse_parsed([parse_source(source) for source in sources], margin, verbose)
+    return analyse_parsed(parse_sources(sources, prepare), margin, verbose)
+
+
+def prepare() -> None:
+    """Import what the rules need, numpy and the audits: what the check does
+    while its files are parsed."""
+    from .. import pipeline, tca, vignetting  # noqa: F401  (the imports are the point)
 
 
 def analyse_parsed(
@@ -126,10 +129,12 @@ class _EntryMetrics:
 def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
     """r_max and the rest for each entry, None where r_max is infinite; entry by
     entry if the batch fails."""
+    import numpy as np
+
     from ..pipeline import audit_entries
 
     def batch(chunk: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"):  # a bad entry is a finding, not a warning
             m = audit_entries(chunk).metrics
         values = zip(
             m.r_max.tolist(),
@@ -172,6 +177,8 @@ def _fold_finding(
             entry,
             "D(r) decreases from the image centre (D'(0) <= 0): the model folds back at once",
         )
+    from ..metrics import is_circular_fisheye
+
     image = "image circle" if is_circular_fisheye(entry.lens, entry.type) else "image corner"
     where = (
         f"D(r) peaks at D(r_max) = {m.d_max:.4g} for r_max = {m.r_max:.4g}, "
@@ -220,6 +227,8 @@ def calibration_findings(
     Their identity is content, as for distortion entries: the kind, the
     entry's own values, then its lens by name.
     """
+    import numpy as np
+
     from .. import tca, vignetting
 
     shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())

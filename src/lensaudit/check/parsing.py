@@ -1,27 +1,38 @@
-"""Parsing a source: the loader's records of its ``<distortion>``,
+"""Parsing the sources: the loader's records of each file's ``<distortion>``,
 ``<vignetting>`` and ``<tca>`` elements, its file-level problem, and the lens
-structure the duplicate rules need, all from one parse of the file."""
+structure the duplicate rules need, all from one parse of the file.
+
+Files are parsed in worker processes where that pays, while the calling
+process imports what the rules need (numpy, the audits); what a worker
+returns is plain rows (:data:`FileParts`), made into records here.
+"""
 
 from __future__ import annotations
 
 import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .. import calibrations, loader
 from .inputs import Source
 from .result import NOT_A_DATABASE, SEVERITY_ERROR, UNREADABLE, XML_ERROR, Finding, clip
 
+if TYPE_CHECKING:
+    from ..workers import Job
+
 
 @dataclass(frozen=True)
 class LensRecord:
     """A ``<lens>`` as the duplicate rules see it: where it is, its untranslated
-    names and its crop factor, and the element for comparing contents."""
+    names and its crop factor, and which of its file's lenses it is."""
 
     line: int
     maker: str
     model: str
     crop_factor: float | str | None  # the number, the text if not a number, None if absent
-    element: object = field(default=None, compare=False, repr=False)
+    index: int = field(default=0, compare=False)  # among the lenses of its file
 
 
 @dataclass
@@ -74,50 +85,112 @@ def _syntax_error(data: bytes, error: Exception) -> tuple[int, int, str]:
     return line, column, text
 
 
-def parse_source(source: Source) -> ParsedSource:
-    """The records of one file, its file-level finding and its lens structure."""
+#: What the check needs of one well-formed file, as marshal data, so that it
+#: can be worked out in a worker process (see :func:`read_parts`).
+FileParts = tuple
+
+
+def read_parts(job: Job) -> FileParts:
+    """Parse the bytes of one file (``job.data``): (problem code, distortion
+    rows, then the rest) as :func:`parsed_source` reads them.
+
+    ``xml-error``: the rows recovery mode salvages, then the error's line,
+    column and sentence; ``not-a-database``: the loader's rows (the file's
+    first), then its message; "" (a database): the rows, the lens index of
+    each (None if they cannot be matched up), the lenses as (line, maker,
+    model, crop factor), the vignetting rows and the TCA rows.
+    """
     from lxml import etree
 
-    display = source.display
-    if source.data is None:
-        problem = Finding(SEVERITY_ERROR, UNREADABLE, display, 0, 0, f"{display}: {source.error}")
-        return ParsedSource(source, [], problem, source.error)
-    data = source.data
+    data = job.data or b""
     try:
         root = etree.fromstring(data, loader.make_parser())
     except etree.XMLSyntaxError as error:
         # The loader's records: one for the file, then what recovery mode salvages.
-        entries, load_error = loader.read_bytes(data, display)
-        if load_error:
-            entries = entries[1:]
-        line, column, text = _syntax_error(data, error)
-        message = clip(f"XML is not well-formed at line {line}, column {column}: {text}")
-        problem = Finding(SEVERITY_ERROR, XML_ERROR, display, line, column, message)
-        return ParsedSource(source, entries, problem, text)
+        rows, load_error = loader.read_rows(data)
+        return (XML_ERROR, rows[1:] if load_error else rows, *_syntax_error(data, error))
     if b"xmlns" in data:
         loader.use_local_names(root)  # as the loader reads it: liblensfun ignores namespaces
     if root.tag != loader.DATABASE_ROOT:
-        entries, load_error = loader.read_bytes(data, display)
-        line = entries[0].line if entries else 1
-        problem = Finding(SEVERITY_ERROR, NOT_A_DATABASE, display, line, 0, clip(load_error))
-        return ParsedSource(source, entries[1:], problem, load_error)
-    entries = list(loader.entries_from_tree(root, display))
+        return (NOT_A_DATABASE, *loader.read_rows(data))
+    rows = loader.rows_from_tree(root)
     lenses, lens_of_element = lens_structure(root)
     elements = list(root.iter("distortion"))
     lens_of_entry = None
-    if len(elements) == len(entries) and all(
-        (element.sourceline or 0) == entry.line
-        for element, entry in zip(elements, entries, strict=True)
+    if len(elements) == len(rows) and all(
+        (element.sourceline or 0) == row[0] for element, row in zip(elements, rows, strict=True)
     ):
         lens_of_entry = [lens_of_element.get(element) for element in elements]
-    vignetting, tca = calibrations.entries_from_tree(root, display)
+    return ("", rows, lens_of_entry, lenses, *calibrations.rows_from_tree(root))
+
+
+def parsed_source(source: Source, parts: FileParts | None) -> ParsedSource:
+    """The records of one file, its file-level finding and its lens structure,
+    from what :func:`read_parts` found in it (None for a file not read)."""
+    display = source.display
+    if source.data is None or parts is None:
+        problem = Finding(SEVERITY_ERROR, UNREADABLE, display, 0, 0, f"{display}: {source.error}")
+        return ParsedSource(source, [], problem, source.error)
+    code, rows = parts[0], parts[1]
+    entries = [loader.DistortionEntry(display, *row) for row in rows]
+    if code == XML_ERROR:
+        line, column, text = parts[2:]
+        message = clip(f"XML is not well-formed at line {line}, column {column}: {text}")
+        problem = Finding(SEVERITY_ERROR, XML_ERROR, display, line, column, message)
+        return ParsedSource(source, entries, problem, text)
+    if code == NOT_A_DATABASE:
+        load_error = parts[2]
+        line = entries[0].line if entries else 1
+        problem = Finding(SEVERITY_ERROR, NOT_A_DATABASE, display, line, 0, clip(load_error))
+        return ParsedSource(source, entries[1:], problem, load_error)
+    lens_of_entry, lenses, vignetting, tca = parts[2:]
     return ParsedSource(
         source,
         entries,
         lens_of_entry=lens_of_entry,
-        lenses=lenses,
-        calibrations={calibrations.VIGNETTING: vignetting, calibrations.TCA: tca},
+        lenses=tuple(LensRecord(*lens, index) for index, lens in enumerate(lenses)),
+        calibrations={
+            kind: calibrations.CalibrationRecords.of_file(kind, display, kind_rows)
+            for kind, kind_rows in zip(calibrations.KINDS, (vignetting, tca), strict=True)
+        },
     )
+
+
+def parse_sources(
+    sources: Sequence[Source], meanwhile: Callable[[], object] = lambda: None
+) -> list[ParsedSource]:
+    """Every source parsed, in worker processes where that pays, while
+    ``meanwhile()`` runs here (see :func:`lensaudit.workers.parse_all`)."""
+    from ..workers import parse_all
+
+    readable = [source for source in sources if source.data is not None]
+    found = iter(parse_all([_job(source) for source in readable], read_parts, meanwhile))
+    return [
+        parsed_source(source, next(found) if source.data is not None else None)
+        for source in sources
+    ]
+
+
+def parse_source(source: Source) -> ParsedSource:
+    """One source parsed here."""
+    return parsed_source(source, None if source.data is None else read_parts(_job(source)))
+
+
+def _job(source: Source) -> Job:
+    from ..workers import Job
+
+    return Job(source.path or Path(source.name), source.display, source.data)
+
+
+def lens_elements(source: Source) -> list:
+    """The ``<lens>`` elements of a database file, in document order, parsed
+    again: the duplicate rules compare the contents of the few that repeat."""
+    from lxml import etree
+
+    root = etree.fromstring(source.data or b"", loader.make_parser())
+    if source.data and b"xmlns" in source.data:
+        loader.use_local_names(root)
+    return list(root.iter("lens"))
 
 
 def _untranslated(element, tag: str) -> str | None:
@@ -129,9 +202,10 @@ def _untranslated(element, tag: str) -> str | None:
     return text
 
 
-def lens_structure(root) -> tuple[tuple[LensRecord, ...], dict]:
-    """Every ``<lens>`` in document order, and the lens index of each ``<distortion>``."""
-    lenses: list[LensRecord] = []
+def lens_structure(root) -> tuple[list[tuple], dict]:
+    """Every ``<lens>`` in document order, as (line, maker, model, crop factor),
+    and the lens index of each ``<distortion>``."""
+    lenses: list[tuple] = []
     lens_of_element = {}
     for index, element in enumerate(root.iter("lens")):
         crop_text = _untranslated(element, "cropfactor")
@@ -144,17 +218,16 @@ def lens_structure(root) -> tuple[tuple[LensRecord, ...], dict]:
             if crop != crop:
                 crop = crop_text  # NaN would never equal itself as a key
         lenses.append(
-            LensRecord(
+            (
                 element.sourceline or 0,
                 _untranslated(element, "maker") or "",
                 _untranslated(element, "model") or "",
                 crop,
-                element,
             )
         )
         for distortion in element.iter("distortion"):
             lens_of_element[distortion] = index  # the innermost lens wins: iterated last
-    return tuple(lenses), lens_of_element
+    return lenses, lens_of_element
 
 
 def element_content(element, skip_names: bool = False) -> tuple:
