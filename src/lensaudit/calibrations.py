@@ -198,6 +198,12 @@ class _Numbers(dict[str, float]):
         return value
 
 
+#: The numbers met so far, shared by the files of a database; at most
+#: :data:`_NUMBERS_KEPT` (Lensfun's database has about 30,000 distinct ones).
+_NUMBERS = _Numbers()
+_NUMBERS_KEPT = 1 << 16
+
+
 def _row(
     spec: _Spec,
     element: etree._Element,
@@ -261,7 +267,9 @@ def rows_from_tree(root: etree._Element) -> tuple[list[CalibrationRow], list[Cal
     found: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
     specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
     last = lens = None
-    number = _Numbers().__getitem__
+    if len(_NUMBERS) > _NUMBERS_KEPT:
+        _NUMBERS.clear()
+    number = _NUMBERS.__getitem__
     # The lens context is the one the distortion loader gives a <distortion>.
     for element, context in loader.elements_in_context(root, tuple(specs)):
         if context is not last:
@@ -405,29 +413,49 @@ def read_bytes(data: bytes, name: str) -> tuple[CalibrationRecords, CalibrationR
     )
 
 
-def load_files(targets: Iterable[tuple[Path, str]]) -> CalibrationLoad:
+def load_files(
+    targets: Iterable[tuple[Path, str]], meanwhile: Callable[[], object] | None = None
+) -> CalibrationLoad:
     """Read (path, display name) pairs, as :func:`lensaudit.loader.expand` gives them.
 
     A file that cannot be read gives an ``unreadable`` record in both lists.
+    Files are parsed in worker processes where that pays (see
+    :func:`lensaudit.workers.parse_all`), while this process runs
+    ``meanwhile()``: by default, it imports the audits, and numpy with them.
     """
+    from .workers import Job, parse_all
+
+    jobs = [Job(Path(path).resolve(), name) for path, name in targets]
+    found = parse_all(jobs, _read_job, meanwhile or _import_audits)
     names: dict[str, list[str]] = {VIGNETTING: [], TCA: []}
     rows: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
     files = []
-    for path, name in targets:
-        path = Path(path).resolve()
-        try:
-            vignetting, tca, error = read_rows(loader.read_file(path))
-        except OSError as os_error:
-            error = loader.unreadable_file(name, os_error)[1]
-            vignetting = [_error_row(SPECS[VIGNETTING], 0, STATUS_UNREADABLE, error)]
-            tca = [_error_row(SPECS[TCA], 0, STATUS_UNREADABLE, error)]
-        for kind, found in ((VIGNETTING, vignetting), (TCA, tca)):
-            names[kind] += [name] * len(found)
-            rows[kind] += found
-        files.append(SourceFile(name, path, len(vignetting) + len(tca), error))
+    for job, (vignetting, tca, error) in zip(jobs, found, strict=True):
+        for kind, kind_rows in ((VIGNETTING, vignetting), (TCA, tca)):
+            names[kind] += [job.name] * len(kind_rows)
+            rows[kind] += kind_rows
+        files.append(SourceFile(job.name, job.path, len(vignetting) + len(tca), error))
     return CalibrationLoad(
         *(CalibrationRecords(kind, names[kind], rows[kind]) for kind in KINDS), files
     )
+
+
+def _read_job(job: Any) -> tuple[list[CalibrationRow], list[CalibrationRow], str]:
+    """:func:`read_rows` of a file (a :class:`lensaudit.workers.Job`), or its
+    ``unreadable`` rows: marshal data, as a worker process sends it."""
+    try:
+        return read_rows(loader.read_file(job.path))
+    except OSError as os_error:
+        error = loader.unreadable_file(job.name, os_error)[1]
+        return (
+            [_error_row(SPECS[VIGNETTING], 0, STATUS_UNREADABLE, error)],
+            [_error_row(SPECS[TCA], 0, STATUS_UNREADABLE, error)],
+            error,
+        )
+
+
+def _import_audits() -> None:
+    from . import tca, vignetting  # noqa: F401  (the imports are the point)
 
 
 def load(
