@@ -339,14 +339,11 @@ class CalibrationRecords(Sequence[Any]):
         """One field of every record, in order; kept, so callers must not change it."""
         if name == "file":
             return self._names
-        if not self._columns:
-            fields = SPECS[self.kind].row_fields
-            if self._rows:
-                columns = map(list, zip(*self._rows, strict=True))
-                self._columns = dict(zip(fields, columns, strict=True))
-            else:
-                self._columns = {field: [] for field in fields}
-        return self._columns[name]
+        values = self._columns.get(name)
+        if values is None:
+            index = SPECS[self.kind].row_fields.index(name)
+            values = self._columns[name] = list(map(itemgetter(index), self._rows))
+        return values
 
 
 def entries_from_tree(
