@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 from lensaudit import calibrations
 from lensaudit.database import bundled_database_path
+from test_fuzz_mutations import _start_tag_end_line
 
 #: Per kind: model -> coefficient attributes and their defaults; the attributes
 #: every element needs (positive numbers); the record's fields after ``focal``.
@@ -85,19 +86,9 @@ def start_tag_end_lines(data: bytes, starts: list[int]) -> list[int]:
     """For each start tag at these byte offsets (increasing), the line of its ``>``."""
     lines, line, position = [], 1, 0
     for start in starts:
-        quote, index = None, start
-        while True:
-            byte = data[index : index + 1]
-            if quote:
-                quote = None if byte == quote else quote
-            elif byte in (b'"', b"'"):
-                quote = byte
-            elif byte == b">":
-                break
-            index += 1
-        line += data.count(b"\n", position, index)
-        position = index
-        lines.append(line)
+        line += data.count(b"\n", position, start)
+        position = start
+        lines.append(_start_tag_end_line(data, start, line))
     return lines
 
 

@@ -166,23 +166,24 @@ def baseline_notices(
 ) -> list[Finding]:
     """A notice for each readable file whose baseline version could not be parsed."""
     readable = {f.source.file_name: f.source.display for f in read if f.problem is None}
-    notices = []
-    for name, commit in replaced:
-        if name in readable:
-            text = (
-                f"the baseline's version ({label}) could not be parsed; compared with the "
-                f"last version that can, of commit {commit[:12]}"
-            )
-            notices.append(
-                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
-            )
-    for name in sorted(incomparable):
-        if name in readable:
-            text = (
-                f"the baseline's version ({label}) could not be parsed, and no earlier "
-                f"version that can was found: the findings in this file are not counted as new"
-            )
-            notices.append(
-                Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, text)
-            )
-    return [replace(n, message=clip(n.message)) for n in notices]
+    texts = [
+        (
+            name,
+            f"the baseline's version ({label}) could not be parsed; compared with the "
+            f"last version that can, of commit {commit[:12]}",
+        )
+        for name, commit in replaced
+    ]
+    texts += [
+        (
+            name,
+            f"the baseline's version ({label}) could not be parsed, and no earlier "
+            f"version that can was found: the findings in this file are not counted as new",
+        )
+        for name in sorted(incomparable)
+    ]
+    return [
+        Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, clip(text))
+        for name, text in texts
+        if name in readable
+    ]
