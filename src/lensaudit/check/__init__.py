@@ -52,7 +52,7 @@ and the notice says that too.
 
 The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
 checked and the baseline's), :mod:`~lensaudit.check.parsing` (one parse per
-file), :mod:`~lensaudit.check.findings` and
+file, in worker processes while numpy imports), :mod:`~lensaudit.check.findings` and
 :mod:`~lensaudit.check.duplicates` (the rules),
 :mod:`~lensaudit.check.matching` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
@@ -110,7 +110,7 @@ from .result import (
     entry_key,
 )
 
-#: The name the lensaudit fix command suggestion had when this was one module.
+#: :func:`fix_suggestion`, by the private name some callers use.
 _fix_suggestion = fix_suggestion
 
 __all__ = [
