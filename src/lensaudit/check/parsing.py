@@ -85,8 +85,8 @@ def _syntax_error(data: bytes, error: Exception) -> tuple[int, int, str]:
     return line, column, text
 
 
-#: What the check needs of one well-formed file, as marshal data, so that it
-#: can be worked out in a worker process (see :func:`read_parts`).
+#: What the check needs of one file, as marshal data, so that it can be
+#: worked out in a worker process (see :func:`read_parts`).
 FileParts = tuple
 
 
