@@ -69,7 +69,16 @@ def test_exit_statuses_are_kept(write_xml: Callable[..., Path], tmp_path: Path) 
 
 
 def test_reader_that_goes_away_ends_quietly(bundled_db: Path) -> None:
-    command = [sys.executable, "-m", "lensaudit", "scan", "--no-cache", "-f", "csv", str(bundled_db)]
+    command = [
+        sys.executable,
+        "-m",
+        "lensaudit",
+        "scan",
+        "--no-cache",
+        "-f",
+        "csv",
+        str(bundled_db),
+    ]
     with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as process:
         assert process.stdout is not None and process.stderr is not None
         process.stdout.readline()

@@ -101,3 +101,28 @@ def test_the_output_formats_do_not_import_the_pipeline():
 def test_the_column_names_import_no_other_lensaudit_module():
     found = imported_modules("import lensaudit.columns")
     assert {m for m in found if m.startswith("lensaudit")} == {"lensaudit", "lensaudit.columns"}
+
+
+# The console command's own way in, for a plain scan; lists the modules once it has run.
+CONSOLE_SCAN = (
+    "import json, sys\n"
+    "from lensaudit import console\n"
+    "arguments = console.scan_arguments(sys.argv[1:])\n"
+    "assert arguments is not None\n"
+    "assert console._scan_directly(arguments) == 0\n"
+    "print(json.dumps(sorted(sys.modules)))\n"
+)
+
+
+def test_a_plain_scan_from_the_console_never_imports_click(cache_dir):
+    env = dict(os.environ, LENSAUDIT_CACHE_DIR=str(cache_dir))
+    done = subprocess.run(
+        [sys.executable, "-c", CONSOLE_SCAN, "-f", "csv", "-o", os.devnull],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    modules = set(json.loads(done.stdout.splitlines()[-1]))
+    assert {"numpy", "lxml", "lensaudit.pipeline"} <= modules  # it did scan
+    assert not {name for name in modules if name == "click" or name.startswith("click.")}

@@ -115,7 +115,7 @@ def test_wheel_metadata_declares_the_license_readme_and_command(built):
         assert licenses
         assert archive.read(licenses[0]) == (ROOT / "LICENSE").read_bytes()
         (entry_points,) = [n for n in archive.namelist() if n.endswith("entry_points.txt")]
-        assert "lensaudit = lensaudit.cli:run" in archive.read(entry_points).decode()
+        assert "lensaudit = lensaudit.console:run" in archive.read(entry_points).decode()
 
 
 def test_lensfunpy_is_a_range_not_one_version(built):

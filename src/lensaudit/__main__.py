@@ -1,3 +1,3 @@
-from lensaudit.cli import run
+from lensaudit.console import run
 
 run()

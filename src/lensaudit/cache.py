@@ -332,15 +332,6 @@ def _set_name(paths: list[Path]) -> str:
     return blake2b(b"\0".join(sorted(map(os.fsencode, paths))), digest_size=8).hexdigest()
 
 
-def may_know(paths: list[Path], directory: Path | None = None) -> bool:
-    """Whether the cache of the set of files ``paths`` exists, without reading it
-    (see :class:`ParseCache`): if not, no file of the set is known."""
-    try:
-        return record_file(_KIND, _set_name(paths), _FORMAT, directory).path.exists()
-    except (OSError, RuntimeError, ValueError):
-        return False
-
-
 class ParseCache:
     """Parsed entries, metrics and rendered rows of files, keyed by absolute path,
     valid while the file's content hashes to the stored digest.

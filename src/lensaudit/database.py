@@ -73,7 +73,7 @@ def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> Dat
     """
     if paths:
         given = _unique(Path(p) for p in paths)
-        resolved = tuple(map(database_directory, given))
+        resolved = tuple(database_directory(p) for p in given)
         return DatabaseSource(resolved, ", ".join(map(_describe, given, resolved)))
     here = enclosing_database()
     if here is not None:
@@ -85,14 +85,6 @@ def resolve(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> Dat
         f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
         bundled=True,
     )
-
-
-def resolve_paths(paths: tuple[str | os.PathLike[str], ...] | list[str] | None) -> tuple[Path, ...]:
-    """The paths of :func:`resolve` alone, without naming them (which may run git)."""
-    if paths:
-        return tuple(map(database_directory, _unique(Path(p) for p in paths)))
-    here = enclosing_database()
-    return (here if here is not None else bundled_database_path(),)
 
 
 def _unique(paths: Iterable[Path]) -> tuple[Path, ...]:

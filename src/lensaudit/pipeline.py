@@ -369,12 +369,8 @@ def _audit_files(
         jobs.append((index, Job(path, name, data)))
 
     if jobs:
-        from .early import adopt
-
-        # A worker started with the command may be parsing these files already.
-        adopted = adopt(formats, store is not None)
         parse = file_parser(formats, digests=store is not None)
-        results = parse_all([job for _, job in jobs], parse, _metrics, adopted)
+        results = parse_all([job for _, job in jobs], parse, _metrics)
         for (index, job), (digest, packed, count, error, row_texts) in zip(
             jobs, results, strict=True
         ):

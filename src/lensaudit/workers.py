@@ -24,10 +24,7 @@ import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
-
-if TYPE_CHECKING:
-    from .early import Adopted
+from typing import Any, NoReturn, TypeVar
 
 T = TypeVar("T")
 
@@ -48,23 +45,14 @@ class Job:
     data: bytes | None = None
 
 
-def parse_all(
-    jobs: list[Job],
-    parse: Callable[[Job], T],
-    meanwhile: Callable[[], Any],
-    adopted: Adopted | None = None,
-) -> list[T]:
+def parse_all(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[], Any]) -> list[T]:
     """``[parse(job) for job in jobs]``, computed while ``meanwhile()`` runs here.
 
     ``parse`` must be deterministic and its results :mod:`marshal` data, as
-    it may run in a forked process. ``adopted`` is a worker started before
-    (see :mod:`lensaudit.early`) that parses as ``parse`` does. Exceptions of
-    ``meanwhile`` and of ``parse`` (as met in this process) are raised.
+    it may run in a forked process. Exceptions of ``meanwhile`` and of
+    ``parse`` (as met in this process) are raised.
     """
-    sizes = [size(job) for job in jobs] if jobs and _can_fork() else []
-    if adopted is not None:
-        workers = min(_cpus() - 2, len(jobs) - 1, MAX_WORKERS - 1) if sizes else 0
-        return _in_processes(jobs, sizes, max(workers, 0), parse, meanwhile, adopted)
+    sizes = [_size(job) for job in jobs] if jobs and _can_fork() else []
     workers = min(_cpus() - 1, len(jobs) - 1, MAX_WORKERS) if sum(sizes) >= MIN_BYTES else 0
     if workers < 1:
         return _in_thread(jobs, parse, meanwhile)
@@ -90,8 +78,7 @@ def _cpus() -> int:
         return os.cpu_count() or 1
 
 
-def size(job: Job) -> int:
-    """The number of bytes a job parses (0 if its file cannot be read)."""
+def _size(job: Job) -> int:
     if job.data is not None:
         return len(job.data)
     try:
@@ -125,42 +112,22 @@ def _in_thread(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[
     return outcome["result"]
 
 
-def tasks_of(sizes: list[int]) -> list[list[int]]:
-    """Jobs (by index, given their sizes) grouped into pieces of work for a queue:
-    largest first, so that the last pieces, taken by whoever is free, are small."""
-    order = sorted(range(len(sizes)), key=sizes.__getitem__, reverse=True)
-    count = min(len(order), _MAX_TASKS)
-    return [order[start::count] for start in range(count)]
-
-
-def _queue(count: int) -> int:
-    """The read end of a queue of task numbers 0 .. count - 1."""
-    queue, queue_input = os.pipe()
-    try:
-        os.write(queue_input, b"".join(n.to_bytes(4, "little") for n in range(count)))
-    finally:
-        os.close(queue_input)  # an empty queue then reads as its end
-    return queue
-
-
 def _in_processes(
     jobs: list[Job],
     sizes: list[int],
     workers: int,
     parse: Callable[[Job], T],
     meanwhile: Callable[[], Any],
-    adopted: Adopted | None = None,
 ) -> list[T]:
-    if adopted is None:
-        tasks = tasks_of(sizes)
-        queue = _queue(len(tasks))
-    else:  # its tasks, as indices of these jobs; files these jobs do not need are left to it
-        index_of = {os.fsencode(job.path): index for index, job in enumerate(jobs)}
-        paths = adopted.paths
-        tasks = [
-            [index_of[paths[i]] for i in task if paths[i] in index_of] for task in adopted.tasks
-        ]
-        queue = adopted.queue
+    # Largest first, so that the last pieces, taken by whoever is free, are small.
+    order = sorted(range(len(jobs)), key=sizes.__getitem__, reverse=True)
+    count = min(len(order), _MAX_TASKS)
+    tasks = [order[start::count] for start in range(count)]
+    queue, queue_input = os.pipe()
+    try:
+        os.write(queue_input, b"".join(n.to_bytes(4, "little") for n in range(count)))
+    finally:
+        os.close(queue_input)  # an empty queue then reads as its end
     children: dict[int, int] = {}  # pid -> read end of its results
     results: dict[int, T] = {}
     try:
@@ -175,22 +142,14 @@ def _in_processes(
         meanwhile()
         for index in _take(queue, tasks):
             results[index] = parse(jobs[index])
-        if adopted is not None:
-            found, adopted = adopted.results(), None
-            for i, result in found.items():
-                index = index_of.get(paths[i]) if 0 <= i < len(paths) else None
-                if index is not None:
-                    results.setdefault(index, result)
         for pid, output in list(children.items()):
-            results.update(collect(output))
+            results.update(_collect(output))
             os.close(output)
             del children[pid]
             os.waitpid(pid, 0)
     finally:
         os.close(queue)
         _stop(children)
-        if adopted is not None:  # not collected: this process failed meanwhile
-            adopted.abandon()
     # What a worker did not return (it failed, or was killed) is parsed here.
     return [results[i] if i in results else parse(jobs[i]) for i in range(len(jobs))]
 
@@ -213,7 +172,10 @@ def _work(
         import gc
 
         gc.disable()  # a short life, ended by os._exit: nothing to collect
-        send(output, queue, tasks, jobs, parse)
+        done = [(index, parse(jobs[index])) for index in _take(queue, tasks)]
+        data = memoryview(marshal.dumps(done))
+        while data:
+            data = data[os.write(output, data) :]
         code = 0
     except BaseException:  # noqa: S110  (the caller parses what is missing)
         pass
@@ -223,18 +185,7 @@ def _work(
         os._exit(code)
 
 
-def send(
-    output: int, queue: int, tasks: list[list[int]], jobs: list[Job], parse: Callable[[Job], T]
-) -> None:
-    """Parse the jobs of the tasks taken from ``queue``; write the results to
-    ``output`` as :func:`collect` reads them."""
-    done = [(index, parse(jobs[index])) for index in _take(queue, tasks)]
-    data = memoryview(marshal.dumps(done))
-    while data:
-        data = data[os.write(output, data) :]
-
-
-def collect(output: int) -> dict[int, Any]:
+def _collect(output: int) -> dict[int, Any]:
     """The results a worker sent: job index -> result; empty if it failed."""
     chunks = []
     while chunk := os.read(output, 1 << 20):

@@ -6,11 +6,8 @@ Subcommand modules are imported only when their command runs, so that
 
 from __future__ import annotations
 
-import os
-import sys
 from importlib import import_module
 from importlib.util import find_spec
-from typing import NoReturn
 
 import click
 
@@ -80,10 +77,9 @@ class LazyGroup(click.Group):
         except OSError as error:
             if isinstance(error, BrokenPipeError):
                 raise
-            from ..loader import display_path
+            from ..console import os_error_message
 
-            where = f"{display_path(error.filename)}: " if error.filename is not None else ""
-            click.echo(f"lensaudit: error: {where}{error.strerror or error}", err=True)
+            click.echo(os_error_message(error), err=True)
             ctx.exit(2)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
@@ -106,37 +102,3 @@ def main() -> None:
 
     Exit codes: 0 done, 1 findings (check), 2 bad usage or unreadable input.
     """
-
-
-def run() -> NoReturn:
-    """The ``lensaudit`` console command: :func:`main`, then a quick exit.
-
-    Once the command is done and its output flushed, tearing the interpreter
-    down (freeing every object, finalising numpy and lxml) is work nobody
-    sees: a fifth of a cold scan. The process ends without it, with the
-    command's exit status. Anything but an exit (an interrupt, a crash) takes
-    Python's usual way out.
-    """
-    if sys.argv[1:2] == ["scan"]:
-        from .. import early
-
-        early.start(sys.argv[2:])
-    try:
-        main()  # click's standalone mode: always ends in SystemExit
-        code: object = 0
-    except SystemExit as end:
-        code = end.code
-    finally:
-        if "lensaudit.early" in sys.modules:
-            sys.modules["lensaudit.early"].stop()
-    if code is None:
-        code = 0
-    elif not isinstance(code, int):
-        print(code, file=sys.stderr)
-        code = 1
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
-            code = code or 1
-    os._exit(code)

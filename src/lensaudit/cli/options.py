@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
-import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import click
 
-#: Exit status for bad usage or input that could not be read at all.
-EXIT_INPUT_ERROR = 2
-#: The output formats of the commands that write every entry (scan, fix).
-FORMAT_NAMES = ("table", "csv", "json")
+# Shared with the click-free scan of the console command.
+from ..console import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream
+
+__all__ = [
+    "EXIT_INPUT_ERROR",
+    "FORMAT_NAMES",
+    "cache_option",
+    "database_paths",
+    "fail",
+    "format_option",
+    "output_file",
+    "output_stream",
+]
 
 
 def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -61,23 +68,3 @@ def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
         "cache is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR "
         "or ~/.cache/lensaudit.",
     )(function)
-
-
-def fail(message: str) -> None:
-    """Print a one-line error and exit with status 2 (no traceback)."""
-    click.echo(f"lensaudit: error: {message}", err=True)
-    sys.exit(EXIT_INPUT_ERROR)
-
-
-@contextmanager
-def output_stream(path: Path | None) -> Iterator[TextIO]:
-    """Standard output, or ``path`` opened for writing (UTF-8)."""
-    if path is None or str(path) == "-":
-        yield sys.stdout
-        return
-    try:
-        stream = open(path, "w", encoding="utf-8", newline="")  # noqa: SIM115
-    except OSError as error:
-        fail(f"cannot write {path}: {error.strerror or error}")
-    with stream:
-        yield stream

@@ -2,21 +2,12 @@
 
 from __future__ import annotations
 
-import gc
 from pathlib import Path
 
 import click
 
-from .options import (
-    cache_option,
-    database_paths,
-    fail,
-    format_option,
-    output_file,
-    output_stream,
-)
-
-KIND_NAMES = ("distortion", "vignetting", "tca")
+from ..console import KIND_NAMES
+from .options import cache_option, database_paths, format_option, output_file
 
 
 @click.command()
@@ -76,63 +67,15 @@ def scan(
     (vignetting, tca), status and message; see docs/vignetting.md. The
     cache serves distortion only.
     """
-    from ..loader import LoadError
+    from ..console import ScanArguments
+    from ..console import scan as run_scan
 
-    if kind != "distortion":
-        _scan_calibrations(paths, output_format, kind, output)
-        return
-
-    from ..formats import writer
-    from ..pipeline import run
-
-    _single_blas_thread()
-    collecting = gc.isenabled()
-    # What the scan allocates lives until it ends: the cycle collector would
-    # only walk it over and over (a tenth of importing numpy, for one).
-    gc.disable()
-    try:
-        try:
-            audit = run(list(paths) or None, cache=cache, formats=(output_format,))
-        except LoadError as error:
-            fail(str(error))
-        if audit.files and all(f.error for f in audit.files):
-            fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
-        with output_stream(output) as stream:
-            writer(output_format)(audit, stream)
-    finally:
-        if collecting:
-            gc.enable()
-
-
-def _single_blas_thread() -> None:
-    """Ask numpy's BLAS, if this process is the one to load it, for one thread.
-
-    The audit does no linear algebra, and starting a BLAS thread pool makes
-    importing numpy slower (much slower on a busy machine). Only this
-    process is affected, and only when the user has not chosen.
-    """
-    import os
-    import sys
-
-    if "numpy" not in sys.modules:
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
-def _scan_calibrations(
-    paths: tuple[Path, ...], output_format: str, kind: str, output: Path | None
-) -> None:
-    """``scan --kind vignetting|tca``: read the elements of that kind and audit them."""
-    from importlib import import_module
-
-    from ..calibrations import load
-    from ..loader import LoadError
-
-    try:
-        source, loaded = load(list(paths) or None)
-    except LoadError as error:
-        fail(str(error))
-    if loaded.files and all(f.error for f in loaded.files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in loaded.files))
-    audit = import_module(f"lensaudit.{kind}").from_load(loaded, source)
-    with output_stream(output) as stream:
-        audit.write(output_format, stream)
+    run_scan(
+        ScanArguments(
+            tuple(map(str, paths)),
+            output_format,
+            kind,
+            None if output is None else str(output),
+            cache,
+        )
+    )
