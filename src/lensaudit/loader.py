@@ -174,6 +174,7 @@ def make_parser() -> etree.XMLParser:
         dtd_validation=False,
         huge_tree=False,
         remove_pis=True,
+        collect_ids=False,  # no table of xml:id values: nothing looks them up
     )
 
 
@@ -622,7 +623,12 @@ def _recovered_tree(data: bytes) -> etree._Element | None:
     from lxml import etree
 
     parser = etree.XMLParser(
-        recover=True, resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+        recover=True,
+        resolve_entities=False,
+        no_network=True,
+        load_dtd=False,
+        huge_tree=False,
+        collect_ids=False,
     )
     try:
         return etree.fromstring(data, parser)
