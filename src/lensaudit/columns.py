@@ -7,6 +7,8 @@ another for it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 #: The columns every audit (distortion, vignetting, TCA) starts with: where the
 #: entry is, its lens, its model and focal length.
 LENS_COLUMNS = (
@@ -54,20 +56,26 @@ def format_float(value: float) -> str:
     return "" if text == "nan" else text
 
 
-def float_texts(values: list[float]) -> list[str]:
-    """``repr`` of each float (shortest round-trip, ``inf``, ``nan``), at C speed."""
+def float_texts(values: Sequence[float], special: dict[str, str] | None = None) -> list[str]:
+    """``repr`` of each float (shortest round-trip, ``inf``, ``nan``), at C speed;
+    texts that are keys of ``special`` are replaced by their value there."""
     distinct = dict.fromkeys(values)
-    # A column of few values (an image corner, a crop factor) is written once
-    # per value. Not with a zero in it: 0.0 and -0.0 are one key, two texts.
+    # A column of few values (an image corner, a crop factor, inf) is written
+    # once per value. Not with a zero in it: 0.0 and -0.0 are one key, two texts.
     if 4 * len(distinct) <= len(values) and 0.0 not in distinct:
         known = {value: repr(value) for value in distinct}
+        if special:
+            known = {value: special.get(text, text) for value, text in known.items()}
         return list(map(known.__getitem__, values))
-    return list(map(repr, values))
-
-
-def format_floats(values: list[float]) -> list[str]:
-    """:func:`format_float` over a list, at C speed for the common case."""
-    texts = float_texts(values)
-    if "nan" in texts:
-        texts = ["" if text == "nan" else text for text in texts]
+    texts = list(map(repr, values))
+    if special and any(text in texts for text in special):
+        texts = [special.get(text, text) for text in texts]
     return texts
+
+
+def format_floats(values: Sequence[float]) -> list[str]:
+    """:func:`format_float` over a list, at C speed for the common case."""
+    return float_texts(values, _EMPTY_NAN)
+
+
+_EMPTY_NAN = {"nan": ""}

@@ -65,10 +65,7 @@ def _clean(value: Any) -> Any:
 
 def _floats(values: list[float]) -> list[str]:
     # float.__repr__ is what json writes for a finite float.
-    texts = float_texts(values)
-    if "nan" in texts or "inf" in texts or "-inf" in texts:
-        texts = [_SPECIAL_FLOATS.get(text, text) for text in texts]
-    return texts
+    return float_texts(values, _SPECIAL_FLOATS)
 
 
 def _values(name: str, values: list) -> list[str]:
