@@ -35,7 +35,7 @@ except ImportError:
     from hashlib import blake2b
 
 #: The kinds of store file; eviction considers only files named after one of them.
-KINDS = ("parsed", "history")
+KINDS = ("parsed", "history", "check")
 
 MAGIC = b"lensaudit cache\n"
 CHECKSUM_SIZE = 32

@@ -64,6 +64,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from .. import database
 from .findings import analyse, analyse_parsed, fix_suggestion, prepare
@@ -109,6 +110,9 @@ from .result import (
     describe,
     entry_key,
 )
+
+if TYPE_CHECKING:
+    from .cache import CheckCache
 
 #: :func:`fix_suggestion`, by the private name some callers use.
 _fix_suggestion = fix_suggestion
@@ -161,6 +165,7 @@ def check(
     baseline: str | os.PathLike[str] | None = None,
     margin: float = DEFAULT_MARGIN,
     verbose: bool = False,
+    cache: bool = False,
 ) -> CheckResult:
     """Check a Lensfun database: directories and/or XML files, where a Lensfun
     checkout means its ``data/db``; None: the checkout around the working
@@ -170,7 +175,10 @@ def check(
     is an existing directory or file, or else a git revision of the
     repository holding the paths. ``margin`` (>= 1) is the r_normalized
     below which a fold outside the image is a warning; ``verbose`` adds the
-    notices about folds. Raises :class:`lensaudit.loader.LoadError`
+    notices about folds. With ``cache``, what an earlier check made of files
+    with the same bytes is reused, and what this one makes is kept (see
+    :mod:`lensaudit.check.cache`); the result is the same either way. Raises
+    :class:`lensaudit.loader.LoadError`
     (:class:`CheckError` included) when the input or the baseline cannot be
     read at all.
     """
@@ -186,15 +194,35 @@ def check(
         raise CheckError(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
+    store = None
+    if cache:
+        from .cache import CheckCache
+
+        store = CheckCache()
+    try:
+        return _check(source, sources, baseline, margin, verbose, store)
+    finally:
+        if store is not None:
+            store.save()
+
+
+def _check(
+    source: database.DatabaseSource,
+    sources: list[Source],
+    baseline: str | os.PathLike[str] | None,
+    margin: float,
+    verbose: bool,
+    cache: CheckCache | None,
+) -> CheckResult:
     # inputs -> parsing -> findings (-> matching, with a baseline) -> CheckResult
-    read = parse_sources(sources, meanwhile=prepare)
-    files, current = analyse_parsed(read, margin, verbose)
+    read = parse_sources(sources, meanwhile=prepare, cache=cache)
+    files, current = analyse_parsed(read, margin, verbose, cache)
     if baseline is None:
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
-    before_read = parse_sources(baseline_sources(label, source.paths))
+    before_read = parse_sources(baseline_sources(label, source.paths), cache=cache)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH)
-    _, before = analyse_parsed(before_read, margin, verbose)
+    _, before = analyse_parsed(before_read, margin, verbose, cache)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)
     if notices:

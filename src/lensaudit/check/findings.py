@@ -11,6 +11,7 @@ import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from .. import calibrations, loader
 from .duplicates import duplicate_focals, duplicate_lenses
@@ -41,6 +42,9 @@ from .result import (
     entry_key,
 )
 
+if TYPE_CHECKING:
+    from .cache import CheckCache
+
 _STATUS_CODES = {
     loader.STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
     loader.STATUS_BAD_VALUE: BAD_VALUE,
@@ -66,12 +70,20 @@ def prepare() -> None:
 
 
 def analyse_parsed(
-    read: Sequence[ParsedSource], margin: float, verbose: bool
+    read: Sequence[ParsedSource],
+    margin: float,
+    verbose: bool,
+    cache: CheckCache | None = None,
 ) -> tuple[list[CheckedFile], list[Identified]]:
-    """:func:`analyse` of files already parsed; findings in file and line order."""
+    """:func:`analyse` of files already parsed; findings in file and line order.
+
+    With a ``cache``, the findings of a file whose content it has met under
+    the same ``margin`` and ``verbose`` are taken from it, and the others kept
+    in it.
+    """
     files = [
         CheckedFile(
-            f.source.display, f.source.path, len(f.entries), f.problem.message if f.problem else ""
+            f.source.display, f.source.path, f.count, f.problem.message if f.problem else ""
         )
         for f in read
     ]
@@ -83,13 +95,56 @@ def analyse_parsed(
     for index, file in enumerate(read):
         if file.problem is not None:
             add(index, file_identified(file))
+    # Each file's own findings, in the order the rules make them: a file's
+    # findings on one line keep that order.
+    for index, items in enumerate(file_findings(read, margin, verbose, cache)):
+        for item in items:
+            add(index, item)
+    for index, item in duplicate_lenses(read):
+        add(index, item)
+    ordered.sort(key=lambda pair: pair[0])
+    return files, [item for _, item in ordered]
 
-    entries = [
-        (index, entry)
-        for index, file in enumerate(read)
-        if file.problem is None
-        for entry in file.entries
+
+def file_findings(
+    read: Sequence[ParsedSource],
+    margin: float,
+    verbose: bool,
+    cache: CheckCache | None = None,
+) -> list[list[Identified]]:
+    """The findings each file makes alone, per file: its distortion entries,
+    vignetting and TCA records and duplicate focal lengths (none for a file
+    with a file-level problem), from the ``cache`` where it has them."""
+    setting = f"{margin!r} {verbose:d}"
+    found: list[list[Identified] | None] = [
+        [] if file.problem is not None else None for file in read
     ]
+    if cache is not None:
+        for index, file in enumerate(read):
+            if found[index] is None and file.digest:
+                stored = cache.findings(file.digest, setting)
+                if stored is not None:
+                    found[index] = _rebuilt(stored, file)
+    todo = [index for index, items in enumerate(found) if items is None]
+    computed = _own_findings([read[index] for index in todo], margin, verbose)
+    for index, items in zip(todo, computed, strict=True):
+        found[index] = items
+        file = read[index]
+        if cache is not None and file.digest:
+            stored = _storable(items, file)
+            if stored is not None:
+                cache.put_findings(file.digest, setting, stored)
+    return [items or [] for items in found]
+
+
+def _own_findings(
+    read: Sequence[ParsedSource], margin: float, verbose: bool
+) -> list[list[Identified]]:
+    """:func:`file_findings` worked out, for files without a file-level problem."""
+    found: list[list[Identified]] = [[] for _ in read]
+    if not read:
+        return found  # numpy and the audits are not needed
+    entries = [(index, entry) for index, file in enumerate(read) for entry in file.entries]
     metrics = _metrics([entry for _, entry in entries])
     for position, (index, entry) in enumerate(entries):
         if entry.status != loader.STATUS_OK:
@@ -105,16 +160,66 @@ def analyse_parsed(
         content = (finding.severity, finding.code, entry_content(entry))
         # The lens by name first; then by content alone, for a renamed lens.
         keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
-        add(index, Identified(finding, keys, (read[index].source.file_name,)))
-
+        found[index].append(Identified(finding, keys, (read[index].source.file_name,)))
     for index, item in calibration_findings(read, verbose):
-        add(index, item)
+        found[index].append(item)
     for index, item in duplicate_focals(read):
-        add(index, item)
-    for index, item in duplicate_lenses(read):
-        add(index, item)
-    ordered.sort(key=lambda pair: pair[0])
-    return files, [item for _, item in ordered]
+        found[index].append(item)
+    return found
+
+
+def _storable(items: list[Identified], file: ParsedSource) -> list | None:
+    """A file's own findings as plain data without its name, or None if one of
+    them names another file (then they are not kept)."""
+    display, name = file.source.display, file.source.file_name
+    stored = []
+    for finding, keys, names in items:
+        if (
+            finding.file != display
+            or finding.known
+            or names != (name,)
+            or any(other != display for other, _ in finding.related)
+        ):
+            return None
+        stored.append(
+            (
+                finding.severity,
+                finding.code,
+                finding.line,
+                finding.column,
+                finding.message,
+                finding.entry_key,
+                tuple(line for _, line in finding.related),
+                keys,
+            )
+        )
+    return stored
+
+
+def _rebuilt(stored: list, file: ParsedSource) -> list[Identified] | None:
+    """A file's own findings from what :func:`_storable` made of them, or None
+    if they do not have its shape."""
+    display, names = file.source.display, (file.source.file_name,)
+    try:
+        return [
+            Identified(
+                Finding(
+                    severity,
+                    code,
+                    display,
+                    line,
+                    column,
+                    message,
+                    entry_key,
+                    related=tuple((display, other) for other in related),
+                ),
+                keys,
+                names,
+            )
+            for severity, code, line, column, message, entry_key, related, keys in stored
+        ]
+    except (TypeError, ValueError):
+        return None
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,11 @@ returns is plain rows (:data:`FileParts`), made into records here.
 
 from __future__ import annotations
 
+import marshal
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,6 +23,7 @@ from .result import NOT_A_DATABASE, SEVERITY_ERROR, UNREADABLE, XML_ERROR, Findi
 
 if TYPE_CHECKING:
     from ..workers import Job
+    from .cache import CheckCache
 
 
 @dataclass(frozen=True)
@@ -35,19 +38,58 @@ class LensRecord:
     index: int = field(default=0, compare=False)  # among the lenses of its file
 
 
-@dataclass
+@dataclass(eq=False)
 class ParsedSource:
-    """One parsed file: its records, its file-level problem (if any), and its
-    lenses, with the lens of each distortion entry when they line up."""
+    """One parsed file: its file-level problem (if any), its lenses, and, made
+    from its rows when first asked for, its records and the lens of each
+    distortion entry when they line up.
+
+    ``count`` is the number of its distortion records; ``digest`` the
+    :func:`lensaudit.cache.content_digest` of its bytes when a cache is used
+    (else b""); ``rows`` gives what :func:`read_parts` found in it.
+    """
 
     source: Source
-    entries: list[loader.DistortionEntry]
+    count: int = 0
     problem: Finding | None = None  # the file-level finding, if any
     problem_text: str = ""  # the problem without its position, to match baselines
-    lens_of_entry: list[int | None] | None = None  # index into ``lenses``, per entry
     lenses: tuple[LensRecord, ...] = ()
-    # <vignetting> and <tca> records of a file that parsed, by kind
-    calibrations: dict[str, calibrations.CalibrationRecords] = field(default_factory=dict)
+    digest: bytes = b""
+    rows: Callable[[], FileParts | None] = field(default=lambda: None, repr=False)
+
+    @cached_property
+    def _records(self) -> tuple[list, list | None, dict]:
+        parts = self.rows()
+        if parts is None:
+            return [], None, {}
+        display = self.source.display
+        code, rows = parts[0], parts[1]
+        if code == NOT_A_DATABASE:
+            rows = rows[1:]  # the first is the loader's record of the file itself
+        entries = [loader.DistortionEntry(display, *row) for row in rows]
+        if code:
+            return entries, None, {}
+        lens_of_entry, _, vignetting, tca = parts[2:]
+        records = {
+            kind: calibrations.CalibrationRecords.of_file(kind, display, kind_rows)
+            for kind, kind_rows in zip(calibrations.KINDS, (vignetting, tca), strict=True)
+        }
+        return entries, lens_of_entry, records
+
+    @property
+    def entries(self) -> list[loader.DistortionEntry]:
+        """Its distortion records (a file that is not a database: those after the first)."""
+        return self._records[0]
+
+    @property
+    def lens_of_entry(self) -> list[int | None] | None:
+        """Index into ``lenses`` of each distortion entry; None when they do not line up."""
+        return self._records[1]
+
+    @property
+    def calibrations(self) -> dict[str, calibrations.CalibrationRecords]:
+        """``<vignetting>`` and ``<tca>`` records of a file that parsed, by kind."""
+        return self._records[2]
 
 
 _POSITION = re.compile(r",? ?(?:\(<string>, )?line (\d+), column (\d+)\)?\s*$")
@@ -124,51 +166,125 @@ def read_parts(job: Job) -> FileParts:
     return ("", rows, lens_of_entry, lenses, *calibrations.rows_from_tree(root))
 
 
-def parsed_source(source: Source, parts: FileParts | None) -> ParsedSource:
-    """The records of one file, its file-level finding and its lens structure,
-    from what :func:`read_parts` found in it (None for a file not read)."""
-    display = source.display
-    if source.data is None or parts is None:
-        problem = Finding(SEVERITY_ERROR, UNREADABLE, display, 0, 0, f"{display}: {source.error}")
-        return ParsedSource(source, [], problem, source.error)
+#: What a file is, whatever it is shown as: (number of distortion records,
+#: its problem as (code, line, column, message, text) or None, its lenses as
+#: (line, maker, model, crop factor)); marshal data, as the check's cache keeps it.
+FileSummary = tuple
+
+
+def summarize(parts: FileParts) -> FileSummary:
+    """The :data:`FileSummary` of what :func:`read_parts` found in a file."""
     code, rows = parts[0], parts[1]
-    entries = [loader.DistortionEntry(display, *row) for row in rows]
     if code == XML_ERROR:
         line, column, text = parts[2:]
         message = clip(f"XML is not well-formed at line {line}, column {column}: {text}")
-        problem = Finding(SEVERITY_ERROR, XML_ERROR, display, line, column, message)
-        return ParsedSource(source, entries, problem, text)
+        return len(rows), (XML_ERROR, line, column, message, text), []
     if code == NOT_A_DATABASE:
         load_error = parts[2]
-        line = entries[0].line if entries else 1
-        problem = Finding(SEVERITY_ERROR, NOT_A_DATABASE, display, line, 0, clip(load_error))
-        return ParsedSource(source, entries[1:], problem, load_error)
-    lens_of_entry, lenses, vignetting, tca = parts[2:]
+        line = rows[0][0] if rows else 1
+        return max(len(rows) - 1, 0), (NOT_A_DATABASE, line, 0, clip(load_error), load_error), []
+    return len(rows), None, parts[3]
+
+
+def summarized_source(
+    source: Source,
+    summary: FileSummary,
+    rows: Callable[[], FileParts | None],
+    digest: bytes = b"",
+) -> ParsedSource:
+    """A parsed file from its summary; ``rows()`` gives its rows when they are needed."""
+    count, problem, lenses = summary
+    finding = None
+    text = ""
+    if problem is not None:
+        code, line, column, message, text = problem
+        finding = Finding(SEVERITY_ERROR, code, source.display, line, column, message)
     return ParsedSource(
         source,
-        entries,
-        lens_of_entry=lens_of_entry,
-        lenses=tuple(LensRecord(*lens, index) for index, lens in enumerate(lenses)),
-        calibrations={
-            kind: calibrations.CalibrationRecords.of_file(kind, display, kind_rows)
-            for kind, kind_rows in zip(calibrations.KINDS, (vignetting, tca), strict=True)
-        },
+        count,
+        finding,
+        text,
+        tuple(LensRecord(*lens, index) for index, lens in enumerate(lenses)),
+        digest,
+        rows,
     )
 
 
+def parsed_source(source: Source, parts: FileParts | None) -> ParsedSource:
+    """The records of one file, its file-level finding and its lens structure,
+    from what :func:`read_parts` found in it (None for a file not read)."""
+    if source.data is None or parts is None:
+        display = source.display
+        problem = Finding(SEVERITY_ERROR, UNREADABLE, display, 0, 0, f"{display}: {source.error}")
+        return ParsedSource(source, problem=problem, problem_text=source.error)
+    return summarized_source(source, summarize(parts), lambda: parts)
+
+
 def parse_sources(
-    sources: Sequence[Source], meanwhile: Callable[[], object] = lambda: None
+    sources: Sequence[Source],
+    meanwhile: Callable[[], object] = lambda: None,
+    cache: CheckCache | None = None,
 ) -> list[ParsedSource]:
     """Every source parsed, in worker processes where that pays, while
-    ``meanwhile()`` runs here (see :func:`lensaudit.workers.parse_all`)."""
+    ``meanwhile()`` runs here (see :func:`lensaudit.workers.parse_all`).
+
+    With a ``cache``, files whose bytes it has met are not parsed again, and
+    what is parsed is kept in it; ``meanwhile()`` then runs only if some file
+    is parsed.
+    """
     from ..workers import parse_all
 
-    readable = [source for source in sources if source.data is not None]
-    found = iter(parse_all([_job(source) for source in readable], read_parts, meanwhile))
-    return [
-        parsed_source(source, next(found) if source.data is not None else None)
-        for source in sources
-    ]
+    digests: dict[int, bytes] = {}
+    known: dict[int, tuple] = {}
+    if cache is not None:
+        from ..cache import content_digest
+
+        for index, source in enumerate(sources):
+            if source.data is not None:
+                digests[index] = content_digest(source.data)
+                found = cache.file(digests[index])
+                if found is not None:
+                    known[index] = found
+    todo = [i for i, s in enumerate(sources) if s.data is not None and i not in known]
+    packed: dict[int, bytes] = {}
+    if todo or cache is None:
+        found = parse_all([_job(sources[i]) for i in todo], _packed, meanwhile)
+        packed = dict(zip(todo, found, strict=True))
+    parsed = []
+    for index, source in enumerate(sources):
+        digest = digests.get(index, b"")
+        if index in known:
+            summary, body = known[index]
+            parsed.append(summarized_source(source, summary, _unpacker(source, body), digest))
+        elif index in packed:
+            parts = marshal.loads(packed[index])
+            summary = summarize(parts)
+            if cache is not None:
+                cache.put_file(digest, summary, packed[index])
+            parsed.append(summarized_source(source, summary, lambda parts=parts: parts, digest))
+        else:
+            parsed.append(parsed_source(source, None))
+    return parsed
+
+
+def _packed(job: Job) -> bytes:
+    """:func:`read_parts` as marshal data: kept as it is by the cache, unpacked once here."""
+    return marshal.dumps(read_parts(job))
+
+
+def _unpacker(source: Source, body: bytes) -> Callable[[], FileParts]:
+    """The rows kept for a file, or, should they not unpack, the file parsed again."""
+
+    def rows() -> FileParts:
+        try:
+            parts = marshal.loads(body)
+            if isinstance(parts, tuple) and len(parts) >= 2 and isinstance(parts[1], list):
+                return parts
+        except (EOFError, ValueError, TypeError):
+            pass
+        return read_parts(_job(source))
+
+    return rows
 
 
 def parse_source(source: Source) -> ParsedSource:

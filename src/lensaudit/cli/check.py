@@ -12,7 +12,7 @@ import click
 
 from ..check_formats import writer
 from ..console import single_blas_thread
-from .options import database_paths, fail, output_file, output_stream
+from .options import cache_option, database_paths, fail, output_file, output_stream
 
 if TYPE_CHECKING:
     from ..check import CheckResult
@@ -59,6 +59,7 @@ EXIT_FINDINGS = 1
     help="Also report, as notices, every fold outside the image and every "
     "vignetting model that is not monotone inside it.",
 )
+@cache_option
 def check(
     paths: tuple[Path, ...],
     baseline: str | None,
@@ -66,6 +67,7 @@ def check(
     output_format: str,
     output: Path | None,
     verbose: bool,
+    cache: bool,
 ) -> None:
     """Fail when a Lensfun database, or a change to it, has models that fold.
 
@@ -101,6 +103,9 @@ def check(
     ls-tree and git cat-file; the work tree is not touched. A baseline file
     that cannot be parsed is replaced by its last version in git that can.
 
+    With --cache (the default), what an earlier check made of a file with the
+    same bytes (the baseline's files too) is reused; the output is the same.
+
     \b
     Exit status:
       0  no finding fails the check (warnings and known findings do not)
@@ -115,7 +120,7 @@ def check(
     # only walk it over and over.
     gc.disable()
     try:
-        result = _run(paths, baseline, margin, verbose, output_format)
+        result = _run(paths, baseline, margin, verbose, output_format, cache)
         with output_stream(output) as stream:
             writer(output_format)(result, stream)
     finally:
@@ -126,7 +131,12 @@ def check(
 
 
 def _run(
-    paths: tuple[Path, ...], baseline: str | None, margin: float, verbose: bool, output_format: str
+    paths: tuple[Path, ...],
+    baseline: str | None,
+    margin: float,
+    verbose: bool,
+    output_format: str,
+    cache: bool,
 ) -> CheckResult:
     """The check's result, its paths as ``output_format`` shows them."""
     from ..check import CheckError
@@ -134,7 +144,9 @@ def _run(
     from ..loader import LoadError
 
     try:
-        result = run_check(list(paths) or None, baseline=baseline, margin=margin, verbose=verbose)
+        result = run_check(
+            list(paths) or None, baseline=baseline, margin=margin, verbose=verbose, cache=cache
+        )
     except (CheckError, LoadError) as error:
         fail(str(error))
     if output_format in ("github", "junit"):
