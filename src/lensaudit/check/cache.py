@@ -37,8 +37,9 @@ from .. import __version__
 
 KIND = "check"
 NAME = "files"
-#: Rows of files not used by the latest run kept at most, in bytes of marshal data.
-KEEP_BYTES = 16 * 1024 * 1024
+#: Rows of files the latest run did not use kept at most, in bytes of marshal
+#: data: about two and a half more versions of Lensfun's whole database.
+KEEP_BYTES = 8 * 1024 * 1024
 #: Settings (margin, verbosity) whose findings are kept per file, the latest first.
 MAX_SETTINGS = 4
 _LAYOUT = "lensaudit check cache 1"

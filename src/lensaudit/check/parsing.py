@@ -246,24 +246,28 @@ def parse_sources(
                 if found is not None:
                     known[index] = found
     todo = [i for i, s in enumerate(sources) if s.data is not None and i not in known]
-    packed: dict[int, bytes] = {}
-    if todo or cache is None:
-        found = parse_all([_job(sources[i]) for i in todo], _packed, meanwhile)
-        packed = dict(zip(todo, found, strict=True))
+    found: dict[int, bytes | FileParts] = {}
+    if cache is None:
+        parts = parse_all([_job(sources[i]) for i in todo], read_parts, meanwhile)
+        found = dict(zip(todo, parts, strict=True))
+    elif todo:
+        # As marshal data, which the cache keeps as it is.
+        packed = parse_all([_job(sources[i]) for i in todo], _packed, meanwhile)
+        found = dict(zip(todo, packed, strict=True))
     parsed = []
     for index, source in enumerate(sources):
         digest = digests.get(index, b"")
         if index in known:
             summary, body = known[index]
             parsed.append(summarized_source(source, summary, _unpacker(source, body), digest))
-        elif index in packed:
-            parts = marshal.loads(packed[index])
+        elif cache is not None and index in found:
+            body = found[index]
+            parts = marshal.loads(body)
             summary = summarize(parts)
-            if cache is not None:
-                cache.put_file(digest, summary, packed[index])
+            cache.put_file(digest, summary, body)
             parsed.append(summarized_source(source, summary, lambda parts=parts: parts, digest))
         else:
-            parsed.append(parsed_source(source, None))
+            parsed.append(parsed_source(source, found.get(index)))
     return parsed
 
 
