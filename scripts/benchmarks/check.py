@@ -3,11 +3,15 @@
 Fresh processes, in turns, on the database bundled with lensfunpy: liblensfun
 is `python -c "import lensfunpy; lensfunpy.Database()"`; the check reads,
 audits (distortion, vignetting and TCA) and judges every file, alone and
-with the same database as a directory baseline (every file parsed twice).
-The check exits 1 on this database (it has findings); that is its answer,
-not a failure. Times are medians; CPU and peak memory as in the scan
-section. The in-process row times ``lensaudit.check.check()`` alone,
-without interpreter start-up, imports or output.
+with the same database as a directory baseline (every file parsed twice
+without the cache). "cold" checks run with --no-cache; "first" checks with
+an empty cache directory each time, which they fill; "warm" checks find
+every file's bytes in check's cache (a directory primed once by the same
+command), and still read and hash every file. The check exits 1 on this
+database (it has findings); that is its answer, not a failure. Times are
+medians; CPU and peak memory as in the scan section. The in-process rows
+time ``lensaudit.check.check()`` alone, without interpreter start-up,
+imports or output.
 """
 
 from __future__ import annotations
@@ -32,16 +36,18 @@ def check_command(*arguments: str) -> list[str]:
     return ["sh", "-c", '"$@"; [ $? -le 1 ]', "sh", *command]
 
 
-def in_process(repeats: int) -> float:
+def in_process(repeats: int, warm_cache: str) -> dict[str, float]:
     from lensaudit.check import check
 
-    check()  # imports, and the solver's first call
-    times = []
+    os.environ["LENSAUDIT_CACHE_DIR"] = warm_cache
+    check(cache=True)  # imports, the solver's first call, and the cache primed
+    times: dict[str, list[float]] = {"cold": [], "warm": []}
     for _ in range(repeats):
-        start = time.perf_counter()
-        check()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+        for name, cache in (("cold", False), ("warm", True)):
+            start = time.perf_counter()
+            check(cache=cache)
+            times[name].append(time.perf_counter() - start)
+    return {name: statistics.median(values) for name, values in times.items()}
 
 
 def run(quick: bool) -> list[dict]:
@@ -50,18 +56,33 @@ def run(quick: bool) -> list[dict]:
     turns = 5 if quick else 15
     compile_bytecode()
     database = str(bundled_database_path())
-    runs = {
-        "liblensfun: lensfunpy.Database()": BASELINE,
+    commands = {
         "lensaudit check": check_command(),
         "lensaudit check -f json": check_command("-f", "json"),
         "lensaudit check --baseline (the same directory)": check_command("--baseline", database),
     }
-    results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
-    with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as cache:
-        env = dict(os.environ, LENSAUDIT_CACHE_DIR=cache)
+    with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as scratch:
+        # name -> (command, cache directory: "" for none, None for a new empty one each run)
+        runs: dict[str, tuple[list[str], str | None]] = {
+            "liblensfun: lensfunpy.Database()": (BASELINE, "")
+        }
+        for index, (name, command) in enumerate(commands.items()):
+            warm = os.path.join(scratch, f"warm-{index}")
+            runs[f"{name}, cold (--no-cache)"] = (command + ["--no-cache"], "")
+            runs[f"{name}, first (empty cache)"] = (command, None)
+            runs[f"{name}, warm (cache)"] = (command, warm)
+            measure(command, dict(os.environ, LENSAUDIT_CACHE_DIR=warm))  # primes its cache
+        results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
         for _ in range(turns):
-            for name, command in runs.items():
-                results[name].append(measure(command, env))
+            for name, (command, cache) in runs.items():
+                if cache is None:
+                    with tempfile.TemporaryDirectory(dir=scratch) as fresh:
+                        env = dict(os.environ, LENSAUDIT_CACHE_DIR=fresh)
+                        results[name].append(measure(command, env))
+                else:
+                    env = dict(os.environ, LENSAUDIT_CACHE_DIR=cache or scratch + "/unused")
+                    results[name].append(measure(command, env))
+        inside = in_process(turns, os.path.join(scratch, "in-process"))
     base = statistics.median(r[0] for r in results[next(iter(runs))])
     rows = []
     for name, measured in results.items():
@@ -75,14 +96,14 @@ def run(quick: bool) -> list[dict]:
                 "x liblensfun": wall / base,
             }
         )
-    seconds = in_process(turns)
-    rows.append(
-        {
-            "work": "lensaudit.check.check(), in-process",
-            "wall s": seconds,
-            "CPU s": "",
-            "peak MB": "",
-            "x liblensfun": "",
-        }
-    )
+    for name, seconds in inside.items():
+        rows.append(
+            {
+                "work": f"lensaudit.check.check(), in-process, {name}",
+                "wall s": seconds,
+                "CPU s": "",
+                "peak MB": "",
+                "x liblensfun": "",
+            }
+        )
     return rows
