@@ -289,12 +289,20 @@ def test_a_record_of_another_shape_is_not_used(bad_database, record):
     assert rendered(bad_database, cache=True) == expected
 
 
-def test_stored_findings_of_another_shape_are_worked_out_again(bad_database):
+@pytest.mark.parametrize(
+    "finding",
+    [
+        ("too", "short"),
+        ("error", "fold-in-image", "11", 0, "text", (), (), ()),  # a line that is text
+        ("error", "fold-in-image", 11, 0, "text", (), ("a",), ()),  # a related line too
+    ],
+)
+def test_stored_findings_of_another_shape_are_worked_out_again(bad_database, finding):
     expected = rendered(bad_database)
     check(bad_database, cache=True)
     cache = check_cache.CheckCache()
     for record in cache._records.values():
-        record[2] = {setting: [("too", "short")] for setting in record[2]}
+        record[2] = {setting: [finding] for setting in record[2]}
     cache._changed = True
     cache._used = dict.fromkeys(cache._records)
     cache.save()

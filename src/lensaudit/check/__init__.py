@@ -56,7 +56,10 @@ file, in worker processes while numpy imports), :mod:`~lensaudit.check.findings`
 :mod:`~lensaudit.check.duplicates` (the rules),
 :mod:`~lensaudit.check.matching` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
-:mod:`lensaudit.check_formats`.
+:mod:`lensaudit.check_formats`. With ``cache=True``, what parsing and the
+rules make of each file is kept by the content of its bytes
+(:mod:`~lensaudit.check.cache`) and reused for the same bytes, in the
+database or in a baseline.
 """
 
 from __future__ import annotations

@@ -200,26 +200,35 @@ def _rebuilt(stored: list, file: ParsedSource) -> list[Identified] | None:
     """A file's own findings from what :func:`_storable` made of them, or None
     if they do not have its shape."""
     display, names = file.source.display, (file.source.file_name,)
-    try:
-        return [
-            Identified(
-                Finding(
-                    severity,
-                    code,
-                    display,
-                    line,
-                    column,
-                    message,
-                    entry_key,
-                    related=tuple((display, other) for other in related),
-                ),
-                keys,
-                names,
-            )
-            for severity, code, line, column, message, entry_key, related, keys in stored
-        ]
-    except (TypeError, ValueError):
-        return None
+    rebuilt = []
+    for item in stored:
+        if not (isinstance(item, tuple) and len(item) == 8):
+            return None
+        severity, code, line, column, message, entry_key, related, keys = item
+        if not (
+            isinstance(severity, str)
+            and isinstance(code, str)
+            and isinstance(line, int)
+            and isinstance(column, int)
+            and isinstance(message, str)
+            and isinstance(entry_key, tuple)
+            and isinstance(related, tuple)
+            and all(isinstance(other, int) for other in related)
+            and isinstance(keys, tuple)
+        ):
+            return None
+        finding = Finding(
+            severity,
+            code,
+            display,
+            line,
+            column,
+            message,
+            entry_key,
+            related=tuple((display, other) for other in related),
+        )
+        rebuilt.append(Identified(finding, keys, names))
+    return rebuilt
 
 
 @dataclass(frozen=True)
