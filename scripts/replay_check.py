@@ -210,12 +210,14 @@ def _repository_path(worktree: Path, display: str) -> str:
         return display
 
 
-def judge(worktree: Path, commit: str, parent: str, margin: float = 1.1) -> tuple[str, list[str]]:
+def judge(
+    worktree: Path, commit: str, parent: str, margin: float = 1.1, cache: bool = False
+) -> tuple[str, list[str]]:
     """Check ``commit``, checked out in the git work tree ``worktree``, against
-    ``parent``: the verdict and the failing findings (``!`` marks one that
-    the diff does not justify)."""
+    ``parent`` (with lensaudit's cache if ``cache``): the verdict and the
+    failing findings (``!`` marks one that the diff does not justify)."""
     try:
-        result = check(worktree / DB_DIR, baseline=parent, margin=margin)
+        result = check(worktree / DB_DIR, baseline=parent, margin=margin, cache=cache)
     except LoadError as error:
         return ERROR, [str(error)]
     failing = [f for f in result.findings if f.fails]
@@ -243,8 +245,12 @@ def judge(worktree: Path, commit: str, parent: str, margin: float = 1.1) -> tupl
     return verdict, described
 
 
-def replay(repository: Path, commits: Sequence[str], margin: float = 1.1) -> Iterator[Row]:
-    """Check each commit against its first parent in a temporary shared clone."""
+def replay(
+    repository: Path, commits: Sequence[str], margin: float = 1.1, cache: bool = False
+) -> Iterator[Row]:
+    """Check each commit against its first parent in a temporary shared clone
+    (with lensaudit's cache if ``cache``: each commit then parses only the
+    files it changed)."""
     with tempfile.TemporaryDirectory(prefix="lensaudit-replay-") as temporary:
         worktree = Path(temporary) / "lensfun"
         git(
@@ -264,7 +270,7 @@ def replay(repository: Path, commits: Sequence[str], margin: float = 1.1) -> Ite
             if not parents:
                 continue  # the first commit has nothing to compare with
             git(worktree, "checkout", "--quiet", "--force", "--detach", commit)
-            verdict, findings = judge(worktree, commit, parents[0], margin)
+            verdict, findings = judge(worktree, commit, parents[0], margin, cache)
             yield Row(commit, subject, verdict, findings, time.perf_counter() - started)
 
 
@@ -284,6 +290,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--commits", nargs="+", default=(), help="exactly these commits")
     parser.add_argument("--margin", type=float, default=1.1)
     parser.add_argument("--all", action="store_true", help="list passing commits too")
+    parser.add_argument(
+        "--cache",
+        action="store_true",
+        help="use lensaudit's cache, as a CI job that keeps it would (faster)",
+    )
     args = parser.parse_args(argv)
     try:
         commits = window(args.repository, args.last, args.range, args.commits)
@@ -295,7 +306,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows = []
     started = time.perf_counter()
     print(f"{'commit':8}  {'verdict':16}  {'subject':50}  findings")
-    for row in replay(args.repository, commits, args.margin):
+    for row in replay(args.repository, commits, args.margin, args.cache):
         rows.append(row)
         if row.verdict != PASS or args.all:
             subject = row.subject if len(row.subject) <= 50 else row.subject[:49] + "\u2026"

@@ -99,6 +99,24 @@ def verdicts(history, tmp_path_factory) -> dict[str, replay_check.Row]:
     return {short[row.commit]: row for row in replay_check.replay(history, commits)}
 
 
+@pytest.fixture(scope="module")
+def cached_verdicts(history, verdicts, tmp_path_factory) -> dict[str, replay_check.Row]:
+    """The same commits replayed with lensaudit's cache, as a CI job keeping it would."""
+    names = list(verdicts)
+    full = {replay_check.git(history, "rev-parse", n).decode().strip(): n for n in names}
+    order = [c for c in replay_check.window(history, None, None, ()) if c in full]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("LENSAUDIT_CACHE_DIR", str(tmp_path_factory.mktemp("replay-cache")))
+        return {full[row.commit]: row for row in replay_check.replay(history, order, cache=True)}
+
+
+@needs_history
+def test_the_cache_changes_no_verdict_and_no_finding(verdicts, cached_verdicts):
+    assert {name: (row.verdict, row.findings) for name, row in cached_verdicts.items()} == {
+        name: (row.verdict, row.findings) for name, row in verdicts.items()
+    }
+
+
 @needs_history
 def test_no_commit_of_the_window_is_blamed_for_what_it_did_not_change(verdicts):
     blamed = {name: row.findings for name, row in verdicts.items() if row.verdict != "pass"}
