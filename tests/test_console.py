@@ -68,6 +68,11 @@ WORD = st.sampled_from(
         "--version",
         "-x",
         "-fk",
+        "-f=csv",
+        "-o=x",
+        "-k=tca",
+        "--form",
+        "--format=json=",
     ]
 )
 
@@ -114,7 +119,8 @@ def test_plain_command_lines_are_read_without_click():
         ("db",), "csv", "distortion", "x.csv", False
     )
     assert scan_arguments(["--", "--help"]) == ScanArguments(("--help",))
-    for words in (["--help"], ["-f", "xml"], ["--kind"], ["-o", "."], ["--unknown"]):
+    assert scan_arguments(["-o=x"]) == ScanArguments(output="=x")  # as click reads it
+    for words in (["--help"], ["-f", "xml"], ["--kind"], ["-o", "."], ["--unknown"], ["-f=csv"]):
         assert scan_arguments(words) is None
 
 

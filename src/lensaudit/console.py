@@ -77,9 +77,10 @@ def scan_arguments(words: list[str]) -> ScanArguments | None:
         if not word.startswith("-") or word == "-":
             paths.append(word)
             continue
-        name, equals, value = word.partition("=")
-        if name not in SCAN_OPTIONS and name[:2] in SCAN_OPTIONS and not name.startswith("--"):
-            name, equals, value = name[:2], "=", word[2:]  # -fcsv
+        if word.startswith("--"):
+            name, equals, value = word.partition("=")
+        else:  # a short option's value follows it at once, "=" included: -fcsv, -o=x
+            name, equals, value = word[:2], word[2:3], word[2:]
         setting = SCAN_OPTIONS.get(name)
         if setting is None:
             return None
