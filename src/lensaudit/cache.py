@@ -92,14 +92,7 @@ def _code_digest(package: Path = Path(__file__).parent) -> str:
     All of them, not a chosen few: a module the loader, the metrics or a
     format start to rely on must not be forgotten here.
     """
-    digest = blake2b(digest_size=16)
-    for module in sorted(path for pattern in _CODE for path in package.glob(pattern)):
-        try:
-            name = module.relative_to(package).as_posix()
-            digest.update(name.encode() + b"\0" + module.read_bytes())
-        except (OSError, ValueError):  # not installed from source files: the version must do
-            pass
-    return digest.hexdigest()
+    return store.code_digest(package, _CODE)
 
 
 # Changes with the package version, the record layout and the auditing code.

@@ -60,6 +60,22 @@ def checksum(fingerprint: bytes, body: bytes | memoryview) -> bytes:
     return digest.digest()
 
 
+def code_digest(package: Path, patterns: tuple[str, ...]) -> str:
+    """Digest of the source files of ``package`` that ``patterns`` match (with
+    their names), for a fingerprint: what a cache holds is valid only for the
+    code that made it, and the version alone does not change while that code
+    does. Files that cannot be read are left out (an installation without
+    source files has its version to go by)."""
+    digest = blake2b(digest_size=16)
+    for module in sorted(path for pattern in patterns for path in package.glob(pattern)):
+        try:
+            name = module.relative_to(package).as_posix()
+            digest.update(name.encode() + b"\0" + module.read_bytes())
+        except (OSError, ValueError):
+            pass
+    return digest.hexdigest()
+
+
 class RecordFile:
     """One store file: ``<kind>-<name>.cache`` in ``directory``, valid for ``fingerprint``.
 

@@ -51,16 +51,9 @@ _CODE = ("*.py", "check/*.py")
 def fingerprint(package: Path = Path(__file__).parent.parent) -> bytes:
     """What the records are valid for: lensaudit's version, the record layout and
     a digest of the modules that make them."""
-    from ..store import blake2b
+    from ..store import code_digest
 
-    digest = blake2b(digest_size=16)
-    for module in sorted(path for pattern in _CODE for path in package.glob(pattern)):
-        try:
-            name = module.relative_to(package).as_posix()
-            digest.update(name.encode() + b"\0" + module.read_bytes())
-        except (OSError, ValueError):  # not installed from source files: the version must do
-            pass
-    return f"{_LAYOUT} {__version__} {digest.hexdigest()}".encode()
+    return f"{_LAYOUT} {__version__} {code_digest(package, _CODE)}".encode()
 
 
 def _valid_summary(summary: object) -> bool:

@@ -15,7 +15,6 @@ again. A directory that cannot be used gives a warning, never an error.
 
 from __future__ import annotations
 
-import hashlib
 import marshal
 from array import array
 from collections.abc import Collection
@@ -45,25 +44,22 @@ def default_cache_dir() -> Path:
     return cache_dir()
 
 
+#: The code that decides what a file version holds: how it is read and
+#: audited, and the history's own stages.
+_CODE = ("loader.py", "normalizer.py", "solver.py", "metrics.py", "history/*.py")
+
+
 def fingerprint() -> str:
     """lensaudit's version and the code that decides what a file version holds.
 
     A cached audit is valid only for the code that made it; the version alone
-    would not change while that code does.
+    would not change while that code does. The files are read, not imported:
+    importing the solver would start numpy's threads before the parsing
+    workers are forked.
     """
-    from importlib.util import find_spec
+    from ..store import code_digest
 
-    digest = hashlib.sha256(__version__.encode())
-    # Found, not imported: importing the solver would start numpy's threads
-    # before the parsing workers are forked.
-    parent = __package__.rpartition(".")[0]
-    for module in ("loader", "normalizer", "solver", "metrics"):
-        spec = find_spec(f"{parent}.{module}")
-        if spec is not None and spec.origin:
-            digest.update(Path(spec.origin).read_bytes())
-    for module in sorted(Path(__file__).parent.glob("*.py")):
-        digest.update(module.name.encode() + b"\0" + module.read_bytes())
-    return f"{__version__}-{digest.hexdigest()[:16]}"
+    return f"{__version__}-{code_digest(Path(__file__).parent.parent, _CODE)}"
 
 
 def store_format() -> bytes:
