@@ -224,6 +224,21 @@ def _status(code: object) -> int:
     return 1
 
 
+def dispatch(words: list[str]) -> int:
+    """Run ``lensaudit WORDS...``, to its exit status: a plain scan here, the
+    rest through the click group."""
+    arguments = scan_arguments(words[1:]) if words[:1] == ["scan"] else None
+    if arguments is not None:
+        return _scan_directly(arguments)
+    from .cli import main
+
+    try:
+        main(words)  # click's standalone mode: always ends in SystemExit
+    except SystemExit as end:
+        return _status(end.code)
+    return 0
+
+
 def run() -> NoReturn:
     """The ``lensaudit`` console command; ends without the interpreter's teardown.
 
@@ -233,18 +248,7 @@ def run() -> NoReturn:
     command's exit status. Anything but an exit (a crash) takes Python's
     usual way out.
     """
-    words = sys.argv[1:]
-    arguments = scan_arguments(words[1:]) if words[:1] == ["scan"] else None
-    if arguments is not None:
-        code = _scan_directly(arguments)
-    else:
-        from .cli import main
-
-        try:
-            main()  # click's standalone mode: always ends in SystemExit
-            code = 0
-        except SystemExit as end:
-            code = _status(end.code)
+    code = dispatch(sys.argv[1:])
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
