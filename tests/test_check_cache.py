@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import lens_xml
+from conftest import GIT_ENVIRONMENT, lens_xml
 from damage import FLIPS, flipped
 from lensaudit import cache as scan_cache
 from lensaudit import store
@@ -130,16 +130,6 @@ def test_a_warm_check_against_a_directory_baseline_prints_what_a_cold_one_does(
     )
     assert '"known": true' in cold[1] and '"known": false' in cold[1]
     assert warm == cold == uncached
-
-
-GIT_ENVIRONMENT = {
-    "GIT_AUTHOR_NAME": "Test",
-    "GIT_AUTHOR_EMAIL": "test@example.org",
-    "GIT_COMMITTER_NAME": "Test",
-    "GIT_COMMITTER_EMAIL": "test@example.org",
-    "GIT_CONFIG_NOSYSTEM": "1",
-    "GIT_CONFIG_GLOBAL": os.devnull,
-}
 
 
 @pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from conftest import GIT_ENVIRONMENT
 from lensaudit.check import CheckError, check
 from lensaudit.cli import main
 
@@ -26,15 +27,6 @@ BASELINE_FILES = ("6x6.xml", "actioncams.xml", "slr-vivitar.xml")
 CHANGED_FILE = "actioncams.xml"
 FOLDING = '<distortion model="poly3" focal="123.5" k1="-0.3"/>'  # r_normalized < 0.63
 MALFORMED = '<distortion model="poly3" focal="124.5" k1="NaN"/>'
-
-GIT_ENVIRONMENT = {
-    "GIT_AUTHOR_NAME": "Test",
-    "GIT_AUTHOR_EMAIL": "test@example.org",
-    "GIT_COMMITTER_NAME": "Test",
-    "GIT_COMMITTER_EMAIL": "test@example.org",
-    "GIT_CONFIG_NOSYSTEM": "1",
-    "GIT_CONFIG_GLOBAL": os.devnull,
-}
 
 
 def git(repository: Path, *arguments: str) -> str:

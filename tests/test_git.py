@@ -15,18 +15,10 @@ from pathlib import Path
 
 import pytest
 
+from conftest import GIT_ENVIRONMENT
 from lensaudit import git
 
 pytestmark = pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")
-
-ENVIRONMENT = {
-    "GIT_AUTHOR_NAME": "Tester",
-    "GIT_AUTHOR_EMAIL": "tester@example.org",
-    "GIT_COMMITTER_NAME": "Tester",
-    "GIT_COMMITTER_EMAIL": "tester@example.org",
-    "GIT_CONFIG_GLOBAL": os.devnull,
-    "GIT_CONFIG_NOSYSTEM": "1",
-}
 
 
 def _git(path: Path, *args: str) -> str:
@@ -35,7 +27,7 @@ def _git(path: Path, *args: str) -> str:
         check=True,
         capture_output=True,
         text=True,
-        env=dict(os.environ, **ENVIRONMENT),
+        env=dict(os.environ, **GIT_ENVIRONMENT),
     )
     return done.stdout.strip()
 
