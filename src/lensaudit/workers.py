@@ -133,6 +133,7 @@ def _in_processes(
     try:
         for _ in range(workers):
             output, output_input = os.pipe()
+            _widen(output)
             pid = os.fork()
             if pid == 0:
                 os.close(output)
@@ -152,6 +153,16 @@ def _in_processes(
         _stop(children)
     # What a worker did not return (it failed, or was killed) is parsed here.
     return [results[i] if i in results else parse(jobs[i]) for i in range(len(jobs))]
+
+
+def _widen(pipe: int) -> None:
+    """Let the pipe hold a worker's results whole, where the system allows it."""
+    try:
+        import fcntl
+
+        fcntl.fcntl(pipe, fcntl.F_SETPIPE_SZ, 1 << 20)
+    except (ImportError, AttributeError, OSError):
+        pass
 
 
 def _take(queue: int, tasks: list[list[int]]) -> Iterator[int]:
@@ -176,6 +187,9 @@ def _work(
         data = memoryview(marshal.dumps(done))
         while data:
             data = data[os.write(output, data) :]
+        # Closed now, not at exit: the caller reads to the end of the pipe,
+        # which would otherwise wait for this process's memory to be freed.
+        os.close(output)
         code = 0
     except BaseException:  # noqa: S110  (the caller parses what is missing)
         pass
