@@ -462,14 +462,14 @@ def forge(path: Path, data: bytes, signature_format: bytes) -> None:
 def test_a_cache_file_signed_for_this_version_is_served(small_db, cache_dir_path):
     # Shows that the forgery below is what the cache reads when its checksum holds.
     path, data = primed_cache(small_db, cache_dir_path)
-    forge(path, data, cache_module._FORMAT)
+    forge(path, data, cache_module.fingerprint())
     assert 42.0 in run(small_db, cache=True).column("r_max")
 
 
 def test_a_cache_file_from_another_version_is_ignored(small_db, cache_dir_path):
     uncached = snapshot(run(small_db, cache=False))
     path, data = primed_cache(small_db, cache_dir_path)
-    forge(path, data, b"an older version: " + cache_module._FORMAT)
+    forge(path, data, b"an older version: " + cache_module.fingerprint())
     assert snapshot(run(small_db, cache=True)) == uncached
 
 

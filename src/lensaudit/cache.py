@@ -47,6 +47,7 @@ same packed columns carry parsed files between processes
 
 from __future__ import annotations
 
+import functools
 import os
 from array import array
 from dataclasses import dataclass, fields
@@ -95,12 +96,16 @@ def _code_digest(package: Path = Path(__file__).parent) -> str:
     return store.code_digest(package, _CODE)
 
 
-# Changes with the package version, the record layout and the auditing code.
-_FORMAT = (
-    f"lensaudit parse cache 5 {__version__} {_code_digest()} "
-    f"{' '.join(f'{name}:{kind}' for name, kind in _KINDS.items())} "
-    f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(METRIC_FLAG_COLUMNS)} rows"
-).encode()
+@functools.cache
+def fingerprint() -> bytes:
+    """What the parse cache's files are valid for: the package version, the
+    record layout and the auditing code. Computed when a cache is first used,
+    not at import: a scan without the cache reads no source file for it."""
+    return (
+        f"lensaudit parse cache 5 {__version__} {_code_digest()} "
+        f"{' '.join(f'{name}:{kind}' for name, kind in _KINDS.items())} "
+        f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(METRIC_FLAG_COLUMNS)} rows"
+    ).encode()
 
 
 def content_digest(data: bytes) -> bytes:
@@ -345,7 +350,7 @@ class ParseCache:
         if not _PACKABLE:  # entries of a layout this module cannot store
             return
         try:
-            self._file = record_file(_KIND, _set_name(paths), _FORMAT, directory)
+            self._file = record_file(_KIND, _set_name(paths), fingerprint(), directory)
         except (OSError, RuntimeError, ValueError):
             return
         self.path = self._file.path
