@@ -243,6 +243,7 @@ class LensContext:
 
 #: The children of a ``<lens>`` that make its context.
 _LENS_CHILDREN = ("maker", "model", "mount", "type", "cropfactor", "aspect-ratio")
+_LENS_CHILD_TAGS = frozenset(_LENS_CHILDREN)
 
 
 def lens_context(lens: etree._Element | None) -> LensContext:
@@ -266,8 +267,10 @@ def lens_context(lens: etree._Element | None) -> LensContext:
     # whole text content, as any XML reader gives it: 1<!-- note -->.5 is 1.5.
     texts: dict[str, str] = {}
     mount_list = []
-    for child in lens.iterchildren(*_LENS_CHILDREN):
+    for child in lens:  # all children, tested here: quicker than lxml's filter by six tags
         tag = child.tag
+        if tag not in _LENS_CHILD_TAGS:  # comments and PIs have a function as tag
+            continue
         if tag == "mount":
             mount_list.append(_text(child))
         elif child.get("lang") is None:
