@@ -417,13 +417,19 @@ def load_files(
 
     A file that cannot be read gives an ``unreadable`` record in both lists.
     Files are parsed in worker processes where that pays (see
-    :func:`lensaudit.workers.parse_all`), while this process runs
-    ``meanwhile()``: by default, it imports the audits, and numpy with them.
+    :func:`lensaudit.workers.parse_all`), while this process imports the
+    audits, and numpy with them, then runs ``meanwhile()`` if given.
     """
     from .workers import Job, parse_all
 
+    def imports() -> None:
+        from . import tca, vignetting  # noqa: F401  (the imports are the point)
+
+        if meanwhile is not None:
+            meanwhile()
+
     jobs = [Job(Path(path).resolve(), name) for path, name in targets]
-    found = parse_all(jobs, _read_job, meanwhile or _import_audits)
+    found = parse_all(jobs, _read_job, imports)
     names: dict[str, list[str]] = {VIGNETTING: [], TCA: []}
     rows: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
     files = []
@@ -449,10 +455,6 @@ def _read_job(job: Any) -> tuple[list[CalibrationRow], list[CalibrationRow], str
             [_error_row(SPECS[TCA], 0, STATUS_UNREADABLE, error)],
             error,
         )
-
-
-def _import_audits() -> None:
-    from . import tca, vignetting  # noqa: F401  (the imports are the point)
 
 
 def load(

@@ -68,6 +68,11 @@ class LazyGroup(click.Group):
             raise  # not reached: _usage_error exits
 
     def invoke(self, ctx: click.Context):
+        from ..console import single_blas_thread
+
+        # No command does linear algebra: one BLAS thread, so that numpy starts
+        # quicker and the process stays free to fork workers that parse files.
+        single_blas_thread()
         # The last line of defence: a file-system problem that a command did
         # not foresee (a path too long, a permission) is one line, not a traceback.
         try:

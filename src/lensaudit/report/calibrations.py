@@ -8,6 +8,7 @@ the section gives the counts by severity and the worst entries.
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from html import escape
 from typing import TYPE_CHECKING, Any
 
@@ -20,12 +21,15 @@ if TYPE_CHECKING:
 WORST_SHOWN = 40
 
 
-def audits(audit: Audit) -> tuple[VignettingAudit, TCAAudit]:
-    """The vignetting and TCA audits of the files ``audit`` read."""
+def audits(
+    audit: Audit, meanwhile: Callable[[], object] | None = None
+) -> tuple[VignettingAudit, TCAAudit]:
+    """The vignetting and TCA audits of the files ``audit`` read, parsed (in
+    workers where that pays) while this process runs ``meanwhile()``."""
     from .. import tca, vignetting
     from ..calibrations import load_files
 
-    loaded = load_files([(file.path, file.name) for file in audit.files])
+    loaded = load_files([(file.path, file.name) for file in audit.files], meanwhile)
     return vignetting.from_load(loaded, audit.source), tca.from_load(loaded, audit.source)
 
 

@@ -124,6 +124,10 @@ def _write_text(path: Path, text: str) -> None:
     _atomic(path, lambda p: p.write_text(text, encoding="utf-8", newline=""))
 
 
+def _import_figures() -> None:
+    from . import figures  # noqa: F401  (the import is the point)
+
+
 def write_report(
     audit: Audit,
     directory: str | os.PathLike[str],
@@ -138,7 +142,7 @@ def write_report(
     the paper comparison is added. Returns the paths written.
     """
     from ..formats import writer
-    from . import calibrations, figures, histogram, html, provenance, tables
+    from . import calibrations, histogram, html, provenance, tables
 
     directory = Path(directory)
     names = planned_files(paper_values is not None)
@@ -160,7 +164,11 @@ def write_report(
 
         comparison = paper.compare(audit, paper_values)
 
-    vignetting_audit, tca_audit = calibrations.audits(audit)
+    # The files are parsed again for their vignetting and TCA while matplotlib,
+    # the longest import of all, is imported for the figure.
+    vignetting_audit, tca_audit = calibrations.audits(audit, _import_figures)
+    from . import figures
+
     buffer = io.StringIO()
     writer("csv")(audit, buffer)
     texts = {
