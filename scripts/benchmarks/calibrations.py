@@ -14,11 +14,11 @@ from __future__ import annotations
 import os
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.scan import lensaudit_command
 from lensaudit import calibrations, tca, vignetting
 from lensaudit.database import bundled_database_path
 
@@ -37,9 +37,7 @@ def _median_seconds(work, repeats: int) -> float:
 
 
 def _command(*arguments: str) -> list[str]:
-    installed = Path(sys.executable).with_name("lensaudit")
-    prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    return prefix + ["scan", *arguments, "-f", "csv", "-o", os.devnull]
+    return lensaudit_command("scan", *arguments, "-f", "csv", "-o", os.devnull)
 
 
 def _in_process_rows(name: str, database: Path, repeats: int) -> list[dict]:

@@ -18,21 +18,25 @@ from __future__ import annotations
 
 import os
 import statistics
-import sys
 import tempfile
 import time
-from pathlib import Path
 
-from benchmarks.scan import BASELINE, compile_bytecode, measure
+from benchmarks.scan import (
+    BASELINE,
+    Runs,
+    compile_bytecode,
+    in_turns,
+    lensaudit_command,
+    measure,
+    ratio_rows,
+)
 
 TITLE = "lensaudit check of the whole bundled database vs liblensfun's own load"
 
 
 def check_command(*arguments: str) -> list[str]:
     """A check that counts as done when it exits 0 (passed) or 1 (findings)."""
-    installed = Path(sys.executable).with_name("lensaudit")
-    prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    command = [*prefix, "check", *arguments, "-o", os.devnull]
+    command = lensaudit_command("check", *arguments, "-o", os.devnull)
     return ["sh", "-c", '"$@"; [ $? -le 1 ]', "sh", *command]
 
 
@@ -62,40 +66,15 @@ def run(quick: bool) -> list[dict]:
         "lensaudit check --baseline (the same directory)": check_command("--baseline", database),
     }
     with tempfile.TemporaryDirectory(prefix="lensaudit-bench-") as scratch:
-        # name -> (command, cache directory: "" for none, None for a new empty one each run)
-        runs: dict[str, tuple[list[str], str | None]] = {
-            "liblensfun: lensfunpy.Database()": (BASELINE, "")
-        }
+        runs: Runs = {"liblensfun: lensfunpy.Database()": (BASELINE, "")}
         for index, (name, command) in enumerate(commands.items()):
             warm = os.path.join(scratch, f"warm-{index}")
             runs[f"{name}, cold (--no-cache)"] = (command + ["--no-cache"], "")
             runs[f"{name}, first (empty cache)"] = (command, None)
             runs[f"{name}, warm (cache)"] = (command, warm)
             measure(command, dict(os.environ, LENSAUDIT_CACHE_DIR=warm))  # primes its cache
-        results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
-        for _ in range(turns):
-            for name, (command, cache) in runs.items():
-                if cache is None:
-                    with tempfile.TemporaryDirectory(dir=scratch) as fresh:
-                        env = dict(os.environ, LENSAUDIT_CACHE_DIR=fresh)
-                        results[name].append(measure(command, env))
-                else:
-                    env = dict(os.environ, LENSAUDIT_CACHE_DIR=cache or scratch + "/unused")
-                    results[name].append(measure(command, env))
+        rows = ratio_rows(in_turns(runs, turns, scratch))
         inside = in_process(turns, os.path.join(scratch, "in-process"))
-    base = statistics.median(r[0] for r in results[next(iter(runs))])
-    rows = []
-    for name, measured in results.items():
-        wall = statistics.median(r[0] for r in measured)
-        rows.append(
-            {
-                "work": name,
-                "wall s": wall,
-                "CPU s": statistics.median(r[1] for r in measured),
-                "peak MB": statistics.median(r[2] for r in measured),
-                "x liblensfun": wall / base,
-            }
-        )
     for name, seconds in inside.items():
         rows.append(
             {

@@ -17,18 +17,16 @@ from __future__ import annotations
 import os
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
-from pathlib import Path
+
+from benchmarks.scan import lensaudit_command
 
 TITLE = "fix: refitting every entry of the bundled database that folds in its image"
 
 
 def _command(*arguments: str) -> list[str]:
-    installed = Path(sys.executable).with_name("lensaudit")
-    prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    return prefix + list(arguments)
+    return lensaudit_command(*arguments)
 
 
 def _wall_time(command: list[str]) -> float:

@@ -18,11 +18,11 @@ from __future__ import annotations
 import os
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.scan import lensaudit_command
 from lensaudit.history import audit_history, audit_revision
 
 TITLE = "history: whole Lensfun DB history (fresh processes; x = times a cold scan of the head)"
@@ -34,9 +34,7 @@ GOALS = {"cold": 25.0, "warm": 5.0}
 
 
 def _command(*arguments: str) -> list[str]:
-    installed = Path(sys.executable).with_name("lensaudit")
-    prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    return [*prefix, *arguments]
+    return lensaudit_command(*arguments)
 
 
 def _timed(arguments: list[str], environment: dict[str, str]) -> float:

@@ -35,10 +35,15 @@ BASELINE = [sys.executable, "-c", "import lensfunpy; lensfunpy.Database()"]
 FORMATS = ("table", "csv", "json")
 
 
-def scan_command(output_format: str) -> list[str]:
+def lensaudit_command(*arguments: str) -> list[str]:
+    """The installed ``lensaudit`` command (as a user runs it) with ``arguments``."""
     installed = Path(sys.executable).with_name("lensaudit")
     prefix = [str(installed)] if installed.exists() else [sys.executable, "-m", "lensaudit"]
-    return prefix + ["scan", "--format", output_format, "-o", os.devnull]
+    return [*prefix, *arguments]
+
+
+def scan_command(output_format: str) -> list[str]:
+    return lensaudit_command("scan", "--format", output_format, "-o", os.devnull)
 
 
 def compile_bytecode() -> None:
@@ -83,6 +88,44 @@ def measure(command: list[str], env: dict[str, str]) -> tuple[float, float, floa
     return wall, cpu, peak
 
 
+#: Commands to time, by name: (command, cache directory: "" for none, None
+#: for a new empty one each run, else that directory).
+Runs = dict[str, tuple[list[str], "str | None"]]
+
+
+def in_turns(runs: Runs, turns: int, scratch: str) -> dict[str, list[tuple[float, float, float]]]:
+    """(wall, CPU, peak MB) of each command of ``runs``, run ``turns`` times in
+    turns, with ``$LENSAUDIT_CACHE_DIR`` as its entry says (new directories in
+    ``scratch``)."""
+    results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
+    for _ in range(turns):
+        for name, (command, cache) in runs.items():
+            if cache is None:
+                with tempfile.TemporaryDirectory(dir=scratch) as fresh:
+                    results[name].append(
+                        measure(command, dict(os.environ, LENSAUDIT_CACHE_DIR=fresh))
+                    )
+            else:
+                directory = cache or os.path.join(scratch, "unused")
+                results[name].append(
+                    measure(command, dict(os.environ, LENSAUDIT_CACHE_DIR=directory))
+                )
+    return results
+
+
+def ratio_rows(results: dict[str, list[tuple[float, float, float]]]) -> list[dict]:
+    """One row per command: medians, and the wall time as a multiple of the first's."""
+    medians = {
+        name: [statistics.median(column) for column in zip(*measured, strict=True)]
+        for name, measured in results.items()
+    }
+    base = next(iter(medians.values()))[0]
+    return [
+        {"work": name, "wall s": wall, "CPU s": cpu, "peak MB": peak, "x liblensfun": wall / base}
+        for name, (wall, cpu, peak) in medians.items()
+    ]
+
+
 def in_process(repeats: int, warm_cache: str) -> dict[str, float]:
     import lensfunpy
 
@@ -116,10 +159,7 @@ def run(quick: bool) -> list[dict]:
     scratch = Path(tempfile.mkdtemp(prefix="lensaudit-bench-"))
     try:
         env = dict(os.environ)
-        # name -> (command, cache directory: "" for none, None for a new empty one each run)
-        runs: dict[str, tuple[list[str], str | None]] = {
-            "liblensfun load (lensfunpy.Database)": (BASELINE, "")
-        }
+        runs: Runs = {"liblensfun load (lensfunpy.Database)": (BASELINE, "")}
         for output_format in FORMATS:
             scan = scan_command(output_format)
             warm = scratch / f"warm-{output_format}"
@@ -127,15 +167,7 @@ def run(quick: bool) -> list[dict]:
             runs[f"scan -f {output_format}, first (empty cache)"] = (scan, None)
             runs[f"scan -f {output_format}, warm (cache)"] = (scan, str(warm))
             measure(scan, dict(env, LENSAUDIT_CACHE_DIR=str(warm)))  # primes its cache
-        samples: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
-        for _ in range(repeats):
-            for name, (command, cache) in runs.items():
-                if cache is None:
-                    with tempfile.TemporaryDirectory(dir=scratch) as fresh:
-                        samples[name].append(measure(command, dict(env, LENSAUDIT_CACHE_DIR=fresh)))
-                else:
-                    directory = cache or str(scratch / "unused")
-                    samples[name].append(measure(command, dict(env, LENSAUDIT_CACHE_DIR=directory)))
+        samples = in_turns(runs, repeats, str(scratch))
         medians = {
             name: [statistics.median(column) for column in zip(*values, strict=True)]
             for name, values in samples.items()
