@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 import click
 
 from ..check_formats import writer
-from ..console import single_blas_thread
 from .options import cache_option, database_paths, fail, output_file, output_stream
 
 if TYPE_CHECKING:
@@ -114,7 +113,6 @@ def check(
     """
     if not margin >= 1 or math.isinf(margin):
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
-    single_blas_thread()  # before numpy is imported, with the check
     collecting = gc.isenabled()
     # What the check allocates lives until it ends: the cycle collector would
     # only walk it over and over.
