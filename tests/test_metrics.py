@@ -151,3 +151,14 @@ def test_coefficients_near_the_largest_double_keep_every_number_without_warnings
     assert relative_error(result.r_normalized[0], d_max / corner) < 1e-12
     assert result.tail[0] == (1 if distortion[0] > 0 else -1)
     assert result.folds_in_image[0] == (d_max < corner)
+
+
+def test_exact_values_beyond_the_largest_double_round_to_infinity():
+    """D(r_max) of the exact path can exceed every double: it becomes +-inf, not an error."""
+    from fractions import Fraction
+
+    from lensaudit.metrics import _nearest_double
+
+    assert _nearest_double(Fraction(10) ** 400) == math.inf
+    assert _nearest_double(-(Fraction(10) ** 400)) == -math.inf
+    assert _nearest_double(Fraction(3, 2)) == 1.5

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import normalizer
+from . import normalizer, scalar
 from .solver import min_positive_root
 
 # Exact arithmetic is imported where it is needed: few inputs ever take that path.
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
-HALF_DIAGONAL_MM = float(np.hypot(18.0, 12.0))
+HALF_DIAGONAL_MM = scalar.HALF_DIAGONAL_MM
 
 TAIL_POSITIVE = "positive"
 TAIL_NEGATIVE = "negative"
@@ -96,8 +96,8 @@ def _nearest_double(x: Fraction) -> float:
     """x rounded to binary64; +-inf beyond the largest double."""
     try:
         return float(x)
-    except OverflowError:
-        return math.copysign(math.inf, x)
+    except OverflowError:  # not copysign(inf, x): that converts x to a float again
+        return math.inf if x > 0 else -math.inf
 
 
 def _exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, float, int]:
@@ -144,8 +144,13 @@ def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
     is half the short side either way.
     """
     aspect = np.asarray(aspect_ratio, dtype=np.float64)
-    with np.errstate(divide="ignore"):
-        return np.hypot(np.maximum(aspect, 1.0 / aspect), 1.0)
+    # math.hypot, once per distinct ratio: numpy's hypot is the C library's,
+    # which may round differently, and scalar.entry_metrics must agree.
+    values = aspect.ravel().tolist()
+    corners = {x: scalar.image_corner(x) for x in dict.fromkeys(values)}
+    # 0.0 and -0.0 are one key but two ratios (+inf and -inf inverted): those directly.
+    radii = [corners[x] if x else scalar.image_corner(x) for x in values]
+    return np.array(radii, dtype=np.float64).reshape(aspect.shape)
 
 
 #: Radius of a circular fisheye's image circle in Hugin units: the circle

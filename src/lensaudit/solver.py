@@ -132,6 +132,35 @@ def _q_plain(x: FloatArray, A: FloatArray, B: FloatArray, C: FloatArray) -> Floa
     return ((x + A) * x + B) * x + C
 
 
+def _cube_root_above(y: FloatArray) -> FloatArray:
+    """About cbrt(y) for finite y >= 0, from above (within 11 %), by basic operations alone.
+
+    numpy's cbrt differs from one machine to the next (SIMD versions round
+    differently), and the fast path's answer must be the same float wherever
+    it runs (:mod:`lensaudit.scalar` repeats it): the power of two 2^k just
+    above cbrt(y) (at most twice it), then two of Newton's steps, which
+    approach the root from above.
+    """
+    e = np.frexp(y)[1]
+    z = np.ldexp(1.0, -((-e) // 3))  # y < 2^e <= 2^(3k), k = ceil(e / 3)
+    for _ in range(2):
+        z = (2 * z + y / (z * z)) / 3
+    return np.where(y > 0, z, y)
+
+
+def _scale_exponent(a: FloatArray, b: FloatArray, c: FloatArray) -> NDArray[np.int32]:
+    """t such that |a| 2^t, |b| 2^2t and |c| 2^3t are at most 1, the largest at
+    least 1/8: minus the exponent (as frexp gives it) of max(|a|, sqrt|b|,
+    cbrt|c|), that of cbrt|c| computed exactly from c's. 0 if all are zero."""
+    exponents = [
+        np.where(a != 0, np.frexp(a)[1], _ABSENT),
+        np.where(b != 0, np.frexp(np.sqrt(np.abs(b)))[1], _ABSENT),
+        np.where(c != 0, -((-np.frexp(c)[1]) // 3), _ABSENT),
+    ]
+    largest = np.maximum(exponents[0], np.maximum(exponents[1], exponents[2]))
+    return np.where(largest == _ABSENT, 0, -largest)
+
+
 def _positive_root_guess(m: FloatArray, s: FloatArray) -> FloatArray:
     """An upper bound, within 30 %, of the positive root of t^3 + s t^2 + m = 0 (m <= 0, s >= 0).
 
@@ -139,7 +168,7 @@ def _positive_root_guess(m: FloatArray, s: FloatArray) -> FloatArray:
     so the root lies below it; and it is at most 2^(1/3) times too large.
     """
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.fmin(np.sqrt(-m / s), np.cbrt(-m))
+        return np.fmin(np.sqrt(-m / s), _cube_root_above(-m))
 
 
 def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
@@ -202,7 +231,7 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     # From the inflection point, q(x_i + t) = t^3 + P t + q(x_i) with P >= 0 here.
     with np.errstate(divide="ignore", invalid="ignore"):
         towards = np.fmin(
-            np.abs(q_at_inflection) / slope_at_inflection, np.cbrt(np.abs(q_at_inflection))
+            np.abs(q_at_inflection) / slope_at_inflection, _cube_root_above(np.abs(q_at_inflection))
         )
     guess = np.where(
         right,
@@ -624,8 +653,7 @@ def _search(
 
     ao, bo, co = a[open_], b[open_], c[open_]
     parts = tuple(v[open_] for v in frexps)
-    largest = np.maximum(np.abs(ao), np.maximum(np.sqrt(np.abs(bo)), np.cbrt(np.abs(co))))
-    t = -np.frexp(largest)[1]
+    t = _scale_exponent(ao, bo, co)
     A, B, C = (
         np.where(np.abs(v) >= _SAFE_SCALED, v, 0.0)
         for v in (np.ldexp(ao, t), np.ldexp(bo, 2 * t), np.ldexp(co, 3 * t))
@@ -810,8 +838,7 @@ def _fast(
     unproven root (NaN if it found none), a start for the exact search.
     """
     # One power of two per element, applied per degree: w = 2^t v.
-    largest = np.maximum(np.abs(a), np.maximum(np.sqrt(np.abs(b)), np.cbrt(np.abs(c))))
-    t = -np.frexp(largest)[1]
+    t = _scale_exponent(a, b, c)
     A, B, C = np.ldexp(a, t), np.ldexp(b, 2 * t), np.ldexp(c, 3 * t)
     safe = (
         ((a == 0) | (np.abs(A) >= _SAFE_SCALED))

@@ -1,0 +1,183 @@
+"""lensaudit.scalar gives the array code's metrics bit for bit, wherever it gives any.
+
+The array code (lensaudit.solver, lensaudit.metrics) is the reference here;
+it is itself held to exact rational arithmetic by test_solver_range.py.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lensaudit import metrics, scalar, solver
+from lensaudit.columns import METRIC_COLUMNS
+from lensaudit.pipeline import run
+
+#: Any finite double: hypothesis favours zeros, subnormals and the extremes.
+any_double = st.floats(allow_nan=False, allow_infinity=False)
+#: Coefficients of the size real lenses have, of either sign.
+lens_sized = st.one_of(
+    st.just(0.0),
+    st.floats(-2.0, 2.0, allow_subnormal=False),
+    st.builds(lambda m, e: math.ldexp(m, e), st.floats(-1.0, 1.0), st.integers(-40, 8)),
+)
+#: Exponents uniform over the whole range, subnormals included.
+spread_double = st.one_of(
+    st.just(0.0),
+    st.builds(
+        lambda sign, mantissa, exponent: sign * math.ldexp(mantissa, exponent),
+        st.sampled_from([-1.0, 1.0]),
+        st.floats(0.5, 1.0, exclude_max=True),
+        st.integers(-1074, 1023),
+    ),
+)
+
+
+def bits(value: float) -> bytes:
+    """The binary64 encoding: equal for the same float, zeros and NaN included."""
+    return struct.pack("<d", value)
+
+
+def assert_same_root(a: float, b: float, c: float) -> None:
+    found = scalar.min_positive_root(a, b, c)
+    if found is None:
+        return
+    expected = float(solver.min_positive_root(a, b, c))
+    assert bits(found) == bits(expected), f"{(a, b, c)}: {found!r}, array code {expected!r}"
+
+
+@settings(max_examples=3000, deadline=None)
+@given(any_double, any_double, any_double)
+def test_root_is_the_array_codes_for_any_doubles(a, b, c):
+    assert_same_root(a, b, c)
+
+
+@settings(max_examples=3000, deadline=None)
+@given(spread_double, spread_double, spread_double)
+def test_root_is_the_array_codes_across_the_range(a, b, c):
+    assert_same_root(a, b, c)
+
+
+@settings(max_examples=3000, deadline=None)
+@given(lens_sized, lens_sized, lens_sized)
+def test_root_is_the_array_codes_for_lens_sized_cubics(a, b, c):
+    assert_same_root(a, b, c)
+
+
+def test_every_root_of_a_large_random_sample_is_the_array_codes():
+    """Many cubics at once, solved by the array code in one call (its chunked path)."""
+    rng = np.random.default_rng(20221)
+    size = 60_000
+    exponent = rng.integers(-60, 10, (3, size))
+    a, b, c = rng.uniform(-1, 1, (3, size)) * np.ldexp(1.0, exponent)
+    zero = rng.random((3, size)) < 0.15
+    a[zero[0]], b[zero[1]], c[zero[2]] = 0.0, 0.0, 0.0
+    expected = solver.min_positive_root(a, b, c)
+    answered = 0
+    for args, want in zip(zip(a.tolist(), b.tolist(), c.tolist()), expected.tolist()):
+        found = scalar.min_positive_root(*args)
+        if found is not None:
+            answered += 1
+            assert bits(found) == bits(want), f"{args}: {found!r}, array code {want!r}"
+    # Lens-sized cubics are the fast path's: nearly all are answered.
+    assert answered > 0.95 * size
+
+
+def entry_columns(entries: list[tuple]) -> dict[str, list]:
+    names = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
+    return dict(zip(names, map(list, zip(*(e[:-1] for e in entries), strict=True)), strict=True))
+
+
+def assert_same_metrics(entries: list[tuple]) -> int:
+    """entry_metrics of each (model, a, b, c, k1, k2, crop, aspect, focal, circular)
+    against metrics.compute of them all; the number answered."""
+    columns = entry_columns(entries)
+    circular = [e[-1] for e in entries]
+    computed = metrics.compute(**columns, audited=[True] * len(entries), circular=circular)
+    answered = 0
+    for index, entry in enumerate(entries):
+        found = scalar.entry_metrics(*entry)
+        if found is None:
+            continue
+        answered += 1
+        for name, value in zip(METRIC_COLUMNS, found, strict=True):
+            want = getattr(computed, name)[index].item()
+            if isinstance(value, float):
+                assert bits(value) == bits(want), f"{entry}: {name} {value!r}, array {want!r}"
+            else:
+                assert value == want, f"{entry}: {name} {value!r}, array code {want!r}"
+    return answered
+
+
+def test_every_entry_of_the_bundled_database_is_answered_as_the_array_code_does(bundled_db):
+    audit = run(bundled_db)
+    names = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
+    columns = [audit.column(name) for name in names]
+    circular = [
+        metrics.is_circular_fisheye(lens, kind)
+        for lens, kind in zip(audit.column("lens"), audit.column("type"), strict=True)
+    ]
+    ok = [status == "ok" for status in audit.column("status")]
+    entries = [
+        (*row, flag)
+        for row, flag, audited in zip(zip(*columns, strict=True), circular, ok, strict=True)
+        if audited
+    ]
+    # Every one is answered: a scan of the bundled database needs no numpy.
+    assert assert_same_metrics(entries) == len(entries) > 5000
+
+
+model_entries = st.one_of(
+    st.tuples(st.just("ptlens"), lens_sized, lens_sized, lens_sized, st.just(math.nan)),
+    st.tuples(st.just("poly3"), st.just(math.nan), st.just(math.nan), st.just(math.nan), lens_sized),
+    st.tuples(st.just("poly5"), st.just(math.nan), st.just(math.nan), st.just(math.nan), lens_sized),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            model_entries,
+            lens_sized,
+            st.floats(0.01, 100),
+            st.floats(0.1, 10),
+            st.floats(0.1, 2000),
+            st.booleans(),
+        ),
+        min_size=1,
+        max_size=20,
+    )
+)
+def test_entry_metrics_are_the_array_codes(drawn):
+    entries = []
+    for (model, a, b, c, k1), k2, crop, aspect, focal, circular in drawn:
+        k2 = k2 if model == "poly5" else math.nan
+        entries.append((model, a, b, c, k1, k2, crop, aspect, focal, circular))
+    assert_same_metrics(entries)
+
+
+@settings(max_examples=500, deadline=None)
+@given(any_double, any_double, any_double, any_double)
+def test_entry_metrics_near_the_ends_of_the_range_are_the_array_codes_or_left_to_it(a, b, c, k1):
+    assert_same_metrics(
+        [
+            ("ptlens", a, b, c, math.nan, math.nan, 1.0, 1.5, 50.0, False),
+            ("poly3", math.nan, math.nan, math.nan, k1, math.nan, 1.5, 4 / 3, 20.0, False),
+            ("poly5", math.nan, math.nan, math.nan, a, b, 2.0, 1.0, 8.0, True),
+        ]
+    )
+
+
+@pytest.mark.parametrize("aspect", [1.5, 4 / 3, 16 / 9, 1.0, 2 / 3, 0.0, -0.0, math.inf, 1e-310])
+def test_image_corner_is_the_metrics_one(aspect):
+    assert bits(scalar.image_corner(aspect)) == bits(float(metrics.image_corner(aspect)))
+
+
+def test_half_diagonal_is_hypot_18_12():
+    assert scalar.HALF_DIAGONAL_MM == math.sqrt(18.0**2 + 12.0**2) == 21.633307652783937
