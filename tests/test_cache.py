@@ -164,12 +164,23 @@ def test_a_cold_audit_with_the_cache_parses_each_file_once(small_db, monkeypatch
     assert sorted(calls) == ["a.xml", "b.xml", "c.xml"]
 
 
-def test_scan_from_a_warm_cache_does_not_import_numpy(cache_dir_path):
+def test_scan_from_a_warm_cache_does_not_import_numpy(cache_dir_path, bundled_db, tmp_path):
+    # The bundled database's entries, and one that only numpy's array code audits
+    # (a tangency, 1 - 3 w + 2.25 w^2): the cold scan imports numpy.
+    database = tmp_path / "db"
+    database.mkdir()
+    for source in bundled_db.glob("*.xml"):
+        (database / source.name).write_bytes(source.read_bytes())
+    (database / "tangent.xml").write_text(
+        "<lensdatabase><lens><maker>M</maker><model>L</model><mount>X</mount><calibration>"
+        '<distortion model="poly5" focal="10" k1="-1" k2="0.45"/>'
+        "</calibration></lens></lensdatabase>"
+    )
     script = (
         "import io, sys\n"
         "from lensaudit.pipeline import run\n"
         "from lensaudit.formats import writer\n"
-        "writer('csv')(run(cache=True), io.StringIO())\n"
+        f"writer('csv')(run({str(database)!r}, cache=True), io.StringIO())\n"
         "print('numpy' in sys.modules)\n"
     )
     env = dict(os.environ, LENSAUDIT_CACHE_DIR=str(cache_dir_path))

@@ -54,8 +54,28 @@ def cache_dir(tmp_path: Path) -> Path:
 @pytest.mark.parametrize("output_format", ["table", "csv", "json"])
 def test_a_scan_never_imports_pandas_or_matplotlib(cache_dir, output_format):
     found = imported_by(["scan", "-f", output_format, "-o", os.devnull], cache_dir)
-    assert {"numpy", "lxml"} <= found  # parsed and audited: the check can fail
+    assert "lxml" in found  # parsed: the check can fail
     assert not found & {"pandas", "matplotlib", "scipy"}
+
+
+@pytest.mark.parametrize("output_format", ["table", "csv", "json"])
+def test_a_cold_scan_of_the_bundled_database_audits_without_numpy(cache_dir, output_format):
+    found = imported_by(["scan", "-f", output_format, "-o", os.devnull, "--no-cache"], cache_dir)
+    assert found == {"lxml"}
+
+
+def test_a_scan_imports_numpy_for_entries_the_plain_path_leaves_to_it(cache_dir, tmp_path):
+    # 1 - 3 w + 2.25 w^2 = (1 - 1.5 w)^2 touches zero: the fast path cannot tell
+    # its sign there, the exact path of the array code decides it.
+    database = tmp_path / "db"
+    database.mkdir()
+    (database / "tangent.xml").write_text(
+        "<lensdatabase><lens><maker>M</maker><model>L</model><mount>X</mount>"
+        '<calibration><distortion model="poly5" focal="10" k1="-1" k2="0.45"/>'
+        "</calibration></lens></lensdatabase>"
+    )
+    found = imported_by(["scan", str(database), "-o", os.devnull], cache_dir)
+    assert "numpy" in found
 
 
 @pytest.mark.parametrize("output_format", ["table", "csv", "json"])
@@ -106,5 +126,5 @@ def test_the_column_names_import_no_other_lensaudit_module():
 
 def test_a_plain_scan_from_the_console_never_imports_click(cache_dir):
     found = imported_by(["scan", "-f", "csv", "-o", os.devnull], cache_dir, ("click", *HEAVY))
-    assert {"numpy", "lxml"} <= found  # it did scan
+    assert "lxml" in found  # it did scan
     assert "click" not in found

@@ -181,3 +181,47 @@ def test_image_corner_is_the_metrics_one(aspect):
 
 def test_half_diagonal_is_hypot_18_12():
     assert scalar.HALF_DIAGONAL_MM == math.sqrt(18.0**2 + 12.0**2) == 21.633307652783937
+
+
+# -- in the pipeline -------------------------------------------------------------------
+
+
+def audit_texts(database, monkeypatch, plain: bool) -> tuple[str, str, list, str]:
+    """(csv rows, json rows, metric columns as bits, summary) of a fresh audit,
+    its metrics from lensaudit.scalar where it answers, or all from the array code."""
+    if not plain:
+        monkeypatch.setattr(scalar, "column_metrics", lambda columns, audited: None)
+    audit = run(database, formats=("csv", "json"))
+    columns = audit.metric_columns()
+    as_bits = [
+        [bits(v) if isinstance(v, float) else v for v in columns[name]] for name in METRIC_COLUMNS
+    ]
+    monkeypatch.undo()
+    texts = ["".join(audit.rows(name)) for name in ("csv", "json")]
+    return texts[0], texts[1], as_bits, repr(audit.summary.to_dict())
+
+
+def test_a_scan_of_the_bundled_database_is_the_same_with_the_array_code(bundled_db, monkeypatch):
+    plain = audit_texts(bundled_db, monkeypatch, plain=True)
+    assert plain == audit_texts(bundled_db, monkeypatch, plain=False)
+    assert plain[0].count("\n") > 5000
+
+
+def test_files_with_an_entry_left_to_the_array_code_are_audited_as_it_does(
+    tmp_path, bundled_db, monkeypatch
+):
+    # 1 - 3 w + 2.25 w^2 = (1 - 1.5 w)^2 touches zero: left to the array code.
+    database = tmp_path / "db"
+    database.mkdir()
+    for name in ("slr-canon.xml", "mil-samyang.xml", "compact-sony.xml"):
+        (database / name).write_bytes((bundled_db / name).read_bytes())
+    (database / "tangent.xml").write_text(
+        "<lensdatabase><lens><maker>M</maker><model>L</model><mount>X</mount><calibration>"
+        '<distortion model="poly5" focal="10" k1="-1" k2="0.45"/>'
+        '<distortion model="ptlens" focal="20" a="0.01" b="-0.03" c="0.02"/>'
+        "</calibration></lens></lensdatabase>"
+    )
+    assert scalar.entry_metrics("poly5", *[math.nan] * 3, -1.0, 0.45, 1, 1.5, 10, False) is None
+    plain = audit_texts(database, monkeypatch, plain=True)
+    assert plain == audit_texts(database, monkeypatch, plain=False)
+    assert plain[0].count("tangent.xml,1,") == 2

@@ -158,13 +158,8 @@ def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
 IMAGE_CIRCLE = 1.0
 
 
-def is_circular_fisheye(lens: str, lens_type: str) -> bool:
-    """Whether the database says the lens draws an image circle inside the frame.
-
-    Lensfun has no element for it; it says so in the lens name ("Sigma 8mm
-    f/3.5 EX DG Circular", "... circular fisheye") of a non-rectilinear lens.
-    """
-    return lens_type != "rectilinear" and "circular" in lens.lower()
+#: Whether the database says a lens draws an image circle inside the frame.
+is_circular_fisheye = scalar.is_circular_fisheye
 
 
 def image_radius(aspect_ratio: ArrayLike, circular: ArrayLike | None = None) -> FloatArray:

@@ -7,7 +7,12 @@ An audit of a database is held file by file as columns (the packed form of
 :mod:`lensaudit.cache`); entry objects, numpy arrays and rendered rows are
 made from them when first asked for. That is what lets an unchanged
 database be scanned from the cache without numpy, and a new one be parsed in
-worker processes (:mod:`lensaudit.workers`) while numpy is imported.
+worker processes (:mod:`lensaudit.workers`). The metrics of a file are
+computed as it is parsed, entry by entry in plain Python, by
+:mod:`lensaudit.scalar` (the same floats as the array code); only a file
+with an entry it leaves to the array code has its metrics computed with
+numpy, once every file is parsed. A cold scan of Lensfun's database thus
+never imports numpy.
 """
 
 from __future__ import annotations
@@ -370,16 +375,23 @@ def _audit_files(
 
     if jobs:
         parse = file_parser(formats, digests=store is not None)
-        results = parse_all([job for _, job in jobs], parse, _metrics)
-        for (index, job), (digest, packed, count, error, row_texts) in zip(
+        # numpy is not imported meanwhile: lensaudit.scalar computes the metrics
+        # of nearly every database as files are parsed, and numpy only the rest.
+        results = parse_all([job for _, job in jobs], parse, _nothing)
+        for (index, job), (digest, packed, count, error, file_metrics, texts) in zip(
             jobs, results, strict=True
         ):
             files[index] = SourceFile(job.name, job.path, count, error)
-            parts[index] = FileColumns(packed, count, row_texts=row_texts)
+            if file_metrics is None:
+                parts[index] = FileColumns(packed, count, row_texts=texts)
+            else:
+                parts[index] = FileColumns(packed, count, rows=texts)
+                metrics[index] = file_metrics
             digests[index] = digest
 
     computed = None
     missing = [index for index in range(size) if metrics[index] is None]
+    audited_now = {index for index, _ in jobs}.union(missing)
     if missing:
         computed = _compute([parts[index] for index in missing])
         start = 0
@@ -396,7 +408,7 @@ def _audit_files(
     audit = Audit(
         source,
         files,
-        metrics=computed if len(missing) == size else None,
+        metrics=computed if missing and len(missing) == size else None,
         metric_columns=columns,
         parts=parts,
     )
@@ -404,7 +416,6 @@ def _audit_files(
         for _ in audit.rows(name):  # rendered now, to be cached
             pass
     if store is not None:
-        audited_now = set(missing)
         for index, (file, part) in enumerate(zip(files, parts, strict=True)):
             digest = digests[index]
             new_rows = {k: v for k, v in part.rows.items() if k not in cached_rows[index]}
@@ -416,9 +427,8 @@ def _audit_files(
     return audit
 
 
-def _metrics() -> None:
-    """Import the metrics, and with them numpy: what the caller does while files are parsed."""
-    from . import metrics  # noqa: F401  (the import is the point)
+def _nothing() -> None:
+    """What the caller does while workers parse: its share of the files, no more."""
 
 
 def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tuple]:
@@ -437,8 +447,11 @@ def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tupl
 def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
     """What the audit needs of one file: the digest of the bytes parsed (None if
     unreadable, or not wanted), packed entries, their count, the file error,
-    and each row format's texts of every row before and after its metrics."""
+    the metrics by :mod:`lensaudit.scalar` (None if it leaves any entry to the
+    array code), and each row format's rows (with metrics) or, without them,
+    its texts of every row before and after its metrics."""
     from .cache import content_digest, pack_columns
+    from .scalar import column_metrics
 
     digest = None
     try:
@@ -452,13 +465,21 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
             digest = content_digest(data)
     columns = loader.row_columns(rows)
     packed = pack_columns(columns, len(rows))
-    row_texts = {}
+    metrics = column_metrics(columns, STATUS_OK)
+    texts = {}
     if formats:
         from .formats import row_format
 
         columns["file"] = [job.name] * len(rows)
-        row_texts = {name: row_format(name).row_texts(columns) for name in formats}
-    return digest, packed, len(rows), error, row_texts
+        for name in formats:
+            module = row_format(name)
+            leading, trailing = module.row_texts(columns)
+            if metrics is None:
+                texts[name] = (leading, trailing)
+            else:
+                middle = module.metric_texts(metrics, columns["status"])
+                texts[name] = module.rows(leading, middle, trailing)
+    return digest, packed, len(rows), error, metrics, texts
 
 
 def _compute(parts: list[FileColumns]) -> metrics.Metrics:

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+from .columns import METRIC_COLUMNS
+
 _EPS = 2.0**-52
 _MAX = 1.7976931348623157e308
 _SMALLEST_NORMAL = 2.0**-1022
@@ -36,8 +38,9 @@ _NAN = math.nan
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
 HALF_DIAGONAL_MM = math.hypot(18.0, 12.0)
 
-#: Metrics of one entry: r_max, d_max, tail, r_corner, r_normalized,
-#: r_corner_paper, r_normalized_paper, folds_in_image (0 or 1).
+#: Metrics of one entry, in the order of :data:`lensaudit.columns.METRIC_COLUMNS`:
+#: r_max, d_max, tail, r_corner, r_normalized, r_corner_paper,
+#: r_normalized_paper, folds_in_image (0 or 1).
 EntryMetrics = tuple[float, float, int, float, float, float, float, int]
 
 _isfinite = math.isfinite
@@ -300,6 +303,15 @@ def _cubic(model: str, a: float, b: float, c: float, k1: float, k2: float) -> tu
     return 3 * k1, 5 * k2, 0.0, 2, 1.0, (k2, 0.0, k1, 0.0, 1.0, 0.0)
 
 
+def is_circular_fisheye(lens: str, lens_type: str) -> bool:
+    """Whether the database says the lens draws an image circle inside the frame.
+
+    Lensfun has no element for it; it says so in the lens name ("Sigma 8mm
+    f/3.5 EX DG Circular", "... circular fisheye") of a non-rectilinear lens.
+    """
+    return lens_type != "rectilinear" and "circular" in lens.lower()
+
+
 def image_corner(aspect_ratio: float) -> float:
     """metrics.image_corner of one aspect ratio: hypot(aspect, 1), portrait taken as landscape."""
     inverse = _divide(1.0, aspect_ratio)
@@ -359,3 +371,30 @@ def entry_metrics(
         _divide(d_max, r_corner_paper),
         folds,
     )
+
+
+#: The metrics of an entry that is not audited.
+NOT_AUDITED: EntryMetrics = (_NAN, _NAN, 0, _NAN, _NAN, _NAN, _NAN, 0)
+_INPUTS = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
+
+
+def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | None:
+    """The metrics of entries given as columns (as :func:`lensaudit.loader.row_columns`
+    gives them), as lists by metric column (``tail`` -1/0/1, ``folds_in_image`` 0/1);
+    only entries whose ``status`` is ``audited`` are computed. None if any of
+    them is left to the array code."""
+    found = []
+    append = found.append
+    for status, lens, lens_type, *inputs in zip(
+        columns["status"], columns["lens"], columns["type"], *map(columns.get, _INPUTS)
+    ):
+        if status != audited:
+            append(NOT_AUDITED)
+            continue
+        metrics = entry_metrics(*inputs, is_circular_fisheye(lens, lens_type))
+        if metrics is None:
+            return None
+        append(metrics)
+    if not found:
+        return {name: [] for name in METRIC_COLUMNS}
+    return dict(zip(METRIC_COLUMNS, map(list, zip(*found)), strict=True))

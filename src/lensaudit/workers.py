@@ -1,9 +1,9 @@
 """Parse database files in worker processes while the calling process does other work.
 
-A fresh ``lensaudit scan`` spends about as long importing numpy as parsing
-XML. Where more than one CPU is available, :func:`parse_all` forks worker
-processes before that import; they parse files meanwhile, and the calling
-process joins them once its own work is done. Files are handed out one at a
+Parsing the XML is most of a fresh ``lensaudit scan``. Where more than one
+CPU is available, :func:`parse_all` forks worker processes; they parse files
+while the calling process does its own work, then parses files too, and
+joins them once there are none left. Files are handed out one at a
 time, largest first, through a pipe, so that whichever process is free takes
 the next one. Results come back as :mod:`marshal` data: the packed columns
 of :mod:`lensaudit.cache`, not entry objects.
