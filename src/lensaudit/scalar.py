@@ -34,6 +34,7 @@ _PLAIN_NEWTON_STEPS = 5
 _WELL_CONDITIONED = 1e3
 _INF = math.inf
 _NAN = math.nan
+_ABSENT = -(1 << 20)  # an exponent below every double's
 
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
 HALF_DIAGONAL_MM = math.hypot(18.0, 12.0)
@@ -133,14 +134,16 @@ def _root_guess(m: float, s: float) -> float:
 
 def _scale_exponent(a: float, b: float, c: float) -> int:
     """solver._scale_exponent of one cubic."""
-    exponents = []
+    largest = _ABSENT
     if a != 0:
-        exponents.append(_frexp(a)[1])
+        largest = _frexp(a)[1]
     if b != 0:
-        exponents.append(_frexp(_sqrt(abs(b)))[1])
+        exponent = _frexp(_sqrt(abs(b)))[1]
+        largest = exponent if exponent > largest else largest
     if c != 0:
-        exponents.append(-((-_frexp(c)[1]) // 3))
-    return -max(exponents) if exponents else 0
+        exponent = -((-_frexp(c)[1]) // 3)
+        largest = exponent if exponent > largest else largest
+    return 0 if largest == _ABSENT else -largest
 
 
 def _min_root_scaled(A: float, B: float, C: float) -> float | None:
@@ -199,8 +202,9 @@ def _min_root_scaled(A: float, B: float, C: float) -> float | None:
     step = 0.0
     for _ in range(_PLAIN_NEWTON_STEPS):
         slope = (3 * x + 2 * A) * x + B
-        step = _divide(((x + A) * x + B) * x + C, slope)
-        if _isfinite(step):
+        value = ((x + A) * x + B) * x + C
+        step = value / slope if slope else _divide(value, slope)
+        if step - step == 0:  # finite
             x = x - step
     ax = abs(x)
     slope = abs((3 * x + 2 * A) * x + B) * ax
@@ -226,23 +230,31 @@ def _certainly_infinite_scaled(A: float, B: float, C: float) -> bool:
 def min_positive_root(a: float, b: float, c: float) -> float | None:
     """:func:`lensaudit.solver.min_positive_root` of finite a, b, c where its fast
     path proves the root (the same float); None where another path decides it."""
+    if a >= 0 and b >= 0 and c >= 0:
+        # p(w) >= 1 for w > 0: the array code finds no sign change either (its
+        # fast path, or its exact decision where the fast path is not safe).
+        return _INF
     if b == 0 and c == 0:  # linear: one division rounds -1/a correctly
         w = -1 / a if a < 0 else _INF
         if w < _MAX or a >= 0:
             return w
     t = _scale_exponent(a, b, c)
-    A, B, C = _ldexp(a, t), _ldexp(b, 2 * t), _ldexp(c, 3 * t)
+    # At most 1 in size: no overflow (math.ldexp's error); underflow rounds as numpy's.
+    A, B, C = math.ldexp(a, t), math.ldexp(b, 2 * t), math.ldexp(c, 3 * t)
     if (
         (a != 0 and not abs(A) >= _SAFE_SCALED)
         or (b != 0 and not abs(B) >= _SAFE_SCALED)
         or (c != 0 and not abs(C) >= _SAFE_SCALED)
     ):
         return None
+    # The array code asks this only where it found no root; but where it holds,
+    # p has no sign change at all, which no path of the array code contradicts
+    # (its certificate proves a sign change, its exact decision agrees): inf.
+    if _certainly_infinite_scaled(A, B, C):
+        return _INF
     x = _min_root_scaled(A, B, C)
-    if x is None:
+    if x is None or x == 0:
         return None
-    if x == 0:
-        return _INF if _certainly_infinite_scaled(A, B, C) else None
     if not x > 0:
         return None
     return _certified(x, A, B, C, t)
@@ -357,9 +369,19 @@ def entry_metrics(
             if coefficient != 0:
                 tail = 1 if coefficient > 0 else -1
                 break
-    r_corner = 1.0 if circular else image_corner(aspect_ratio)
-    r_corner_paper = _divide(HALF_DIAGONAL_MM, crop_factor * focal)
-    r_normalized = _divide(d_max, r_corner)
+    if circular:
+        r_corner = 1.0
+    else:
+        r_corner = _CORNERS.get(aspect_ratio)
+        if r_corner is None:
+            r_corner = image_corner(aspect_ratio)
+            # A database has a handful of ratios; 0.0 and -0.0 (one key, two
+            # corners) are not kept.
+            if aspect_ratio and len(_CORNERS) < 64:
+                _CORNERS[aspect_ratio] = r_corner
+    size = crop_factor * focal
+    r_corner_paper = HALF_DIAGONAL_MM / size if size else _divide(HALF_DIAGONAL_MM, size)
+    r_normalized = d_max / r_corner if r_corner else _divide(d_max, r_corner)
     folds = 1 if r_max != _INF and r_normalized < 1 else 0
     return (
         r_max,
@@ -368,9 +390,13 @@ def entry_metrics(
         r_corner,
         r_normalized,
         r_corner_paper,
-        _divide(d_max, r_corner_paper),
+        d_max / r_corner_paper if r_corner_paper else _divide(d_max, r_corner_paper),
         folds,
     )
+
+
+#: image_corner of the aspect ratios met so far.
+_CORNERS: dict[float, float] = {}
 
 
 #: The metrics of an entry that is not audited.
