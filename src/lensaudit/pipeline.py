@@ -473,12 +473,10 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
         columns["file"] = [job.name] * len(rows)
         for name in formats:
             module = row_format(name)
-            leading, trailing = module.row_texts(columns)
             if metrics is None:
-                texts[name] = (leading, trailing)
+                texts[name] = module.row_texts(columns)
             else:
-                middle = module.metric_texts(metrics, columns["status"])
-                texts[name] = module.rows(leading, middle, trailing)
+                texts[name] = module.file_rows(columns, metrics)
     return digest, packed, len(rows), error, metrics, texts
 
 

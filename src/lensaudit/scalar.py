@@ -412,7 +412,11 @@ def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | 
     found = []
     append = found.append
     for status, lens, lens_type, *inputs in zip(
-        columns["status"], columns["lens"], columns["type"], *map(columns.get, _INPUTS)
+        columns["status"],
+        columns["lens"],
+        columns["type"],
+        *map(columns.get, _INPUTS),
+        strict=True,
     ):
         if status != audited:
             append(NOT_AUDITED)
@@ -423,4 +427,4 @@ def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | 
         append(metrics)
     if not found:
         return {name: [] for name in METRIC_COLUMNS}
-    return dict(zip(METRIC_COLUMNS, map(list, zip(*found)), strict=True))
+    return dict(zip(METRIC_COLUMNS, map(list, zip(*found, strict=True)), strict=True))

@@ -17,8 +17,15 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, TextIO
 
-from ..columns import COLUMNS, FLOAT_COLUMNS, TAIL_NAMES, format_floats
-from . import metric_fields, split_rows
+from ..columns import (
+    COLUMNS,
+    FLOAT_COLUMNS,
+    LEADING_COLUMNS,
+    TAIL_NAMES,
+    TRAILING_COLUMNS,
+    format_floats,
+)
+from . import interleaved, metric_fields, split_rows
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -54,11 +61,23 @@ def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     return split_rows(columns, _fields, ",".join, ",".join)
 
 
+def file_rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
+    """Whole rows, as :func:`rows` gives them, from the entry columns and the
+    metric columns of the same entries."""
+    fields = [_fields(name, columns[name]) for name in LEADING_COLUMNS]
+    fields += _metric_fields(metrics, columns["status"])
+    fields += [_fields(name, columns[name]) for name in TRAILING_COLUMNS]
+    return interleaved(["", *[","] * (len(fields) - 1), "\n"], fields)
+
+
+def _metric_fields(metrics: dict[str, list], statuses: list[str]) -> list[list[str]]:
+    return metric_fields(metrics, statuses, format_floats, TAIL_NAMES, _BOOLEAN, "")
+
+
 def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
     """Each entry's metric fields, from the metric columns and the statuses (an
     entry that was not audited has no ``folds_in_image``)."""
-    fields = metric_fields(metrics, statuses, format_floats, TAIL_NAMES, _BOOLEAN, "")
-    return list(map(",".join, zip(*fields, strict=True)))
+    return list(map(",".join, zip(*_metric_fields(metrics, statuses), strict=True)))
 
 
 def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:

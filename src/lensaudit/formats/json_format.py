@@ -31,7 +31,7 @@ from ..columns import (
     TRAILING_COLUMNS,
     float_texts,
 )
-from . import metric_fields, split_rows
+from . import interleaved, metric_fields, split_rows
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -94,11 +94,27 @@ def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
     return split_rows(columns, _values, _LEADING.__mod__, _TRAILING.__mod__)
 
 
+def _metric_fields(metrics: dict[str, list], statuses: list[str]) -> list[list[str]]:
+    return metric_fields(metrics, statuses, _floats, _TAILS, _BOOLEAN, "null")
+
+
 def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
     """Each entry's metric items, from the metric columns and the statuses (an
     entry that was not audited has no ``folds_in_image``)."""
-    fields = metric_fields(metrics, statuses, _floats, _TAILS, _BOOLEAN, "null")
-    return list(map(_METRICS.__mod__, zip(*fields, strict=True)))
+    return list(map(_METRICS.__mod__, zip(*_metric_fields(metrics, statuses), strict=True)))
+
+
+#: The text of an entry around its values, with ",\n" after it (see :func:`file_rows`).
+_LITERALS = (_LEADING + _METRICS + _TRAILING + ",\n").split("%s")
+
+
+def file_rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
+    """Whole entries, as :func:`rows` gives them, from the entry columns and the
+    metric columns of the same entries."""
+    fields = [_values(name, columns[name]) for name in LEADING_COLUMNS]
+    fields += _metric_fields(metrics, columns["status"])
+    fields += [_values(name, columns[name]) for name in TRAILING_COLUMNS]
+    return interleaved(_LITERALS, fields)[:-2]  # no ",\n" after the last
 
 
 def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:
