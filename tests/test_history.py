@@ -1025,3 +1025,10 @@ def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_
         stream = io.StringIO()
         write(stream)
         assert (tmp_path / "forked" / name).read_text(encoding="utf-8") == stream.getvalue()
+
+
+def test_progress_reaches_every_file_version_parsed(repo):
+    seen = []
+    result = audit_history(repo.path, progress=lambda done, total: seen.append((done, total)))
+    assert seen and seen[-1] == (result.blobs_parsed, result.blobs_parsed)
+    assert [done for done, _ in seen] == sorted(done for done, _ in seen)

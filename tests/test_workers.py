@@ -128,3 +128,41 @@ def test_an_audit_in_workers_equals_one_without(bundled_db, monkeypatch):
     assert [(f.name, f.entries, f.error) for f in shared.files] == [
         (f.name, f.entries, f.error) for f in alone.files
     ]
+
+
+@pytest.mark.parametrize("setting", ["forced_workers", "no_workers"])
+def test_progress_counts_up_to_every_job(setting, request):
+    request.getfixturevalue(setting)
+    jobs = [Job(Path(f"/{n}"), str(n), b"x" * n) for n in range(1, 200)]
+    seen: list[tuple[int, int]] = []
+    found = parse_all(
+        jobs,
+        lambda job: len(job.data),
+        lambda: None,
+        lambda done, total: seen.append((done, total)),
+    )
+    assert found == list(range(1, 200))
+    assert seen[-1] == (199, 199)
+    assert all(total == 199 and 0 <= done <= 199 for done, total in seen)
+    assert [done for done, _ in seen] == sorted(done for done, _ in seen)
+
+
+def test_a_job_of_given_size_counts_that_size():
+    assert workers._size(Job(Path("/nowhere/at/all"), "x", size=12345)) == 12345
+    assert workers._size(Job(Path("/nowhere/at/all"), "x")) == 0
+
+
+def test_tasks_in_parallel_give_their_results_in_order(forced_workers):
+    parent = os.getpid()
+    found = workers.in_parallel([lambda n=n: (n * n, os.getpid() != parent) for n in range(5)])
+    assert [value for value, _ in found] == [0, 1, 4, 9, 16]
+    assert any(elsewhere for _, elsewhere in found)
+
+
+def test_tasks_that_cannot_be_forked_run_here_one_after_another(monkeypatch):
+    monkeypatch.setattr(workers, "_can_fork", lambda: False)
+    parent, running = os.getpid(), threading.active_count()
+    found = workers.in_parallel(
+        [lambda n=n: (n, os.getpid(), threading.active_count()) for n in range(3)]
+    )
+    assert found == [(n, parent, running) for n in range(3)]

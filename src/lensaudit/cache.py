@@ -50,6 +50,7 @@ from __future__ import annotations
 import functools
 import os
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from itertools import islice
 from operator import attrgetter
@@ -309,7 +310,7 @@ def _read_records(file: store.RecordFile) -> dict[bytes, _Record]:
 
 
 def record_file(
-    kind: str, name: str, fingerprint: bytes, directory: Path | None = None
+    kind: str, name: str, fingerprint: bytes | Callable[[], bytes], directory: Path | None = None
 ) -> store.RecordFile:
     """The store file ``<kind>-<name>.cache`` (see :class:`lensaudit.store.RecordFile`)
     in :func:`cache_dir` by default, bounded by :data:`MAX_CACHE_FILES` and
@@ -350,7 +351,8 @@ class ParseCache:
         if not _PACKABLE:  # entries of a layout this module cannot store
             return
         try:
-            self._file = record_file(_KIND, _set_name(paths), fingerprint(), directory)
+            # The fingerprint reads the package's sources: not before it is needed.
+            self._file = record_file(_KIND, _set_name(paths), fingerprint, directory)
         except (OSError, RuntimeError, ValueError):
             return
         self.path = self._file.path

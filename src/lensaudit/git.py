@@ -188,3 +188,88 @@ def objects(
         feeder.join()
         answers.close()
         process.wait()
+
+
+def object_sizes(repository: str | os.PathLike[str], names: Sequence[str]) -> list[int | None]:
+    """The size in bytes of each object named (an object id), in order; None for a
+    name that names no object. One ``git cat-file --batch-check``."""
+    if not names:
+        return []
+    answer = run(
+        repository, "cat-file", "--batch-check", stdin="".join(f"{n}\n" for n in names).encode()
+    )
+    sizes: list[int | None] = []
+    for line in answer.splitlines():
+        parts = line.split()
+        sizes.append(int(parts[2]) if len(parts) == 3 else None)
+    if len(sizes) != len(names):
+        raise GitError("git cat-file stopped before answering every request")
+    return sizes
+
+
+class ObjectReader:
+    """Objects of one repository read one at a time, as they are asked for, from a
+    ``git cat-file --batch`` process of the calling thread's own.
+
+    A git process is started on a thread's first read, in each process (a
+    forked worker never shares its parent's) and each thread, so that
+    workers and threads can each read what they are about to parse.
+    :meth:`close` ends those of the calling process.
+    """
+
+    def __init__(self, repository: str | os.PathLike[str]) -> None:
+        self.repository = repository
+        # (process id, thread id) -> its git process
+        self._processes: dict[tuple[int, int], subprocess.Popen[bytes]] = {}
+
+    def read(self, name: str) -> tuple[str, str, bytes] | None:
+        """(object id, type, content) of the object ``name``, or None if it names none.
+
+        Raises :class:`GitUnavailable`, or :class:`GitError` when git stops.
+        """
+        process = self._started()
+        assert process.stdin is not None and process.stdout is not None
+        try:
+            process.stdin.write(name.encode("utf-8", "surrogateescape") + b"\n")
+            process.stdin.flush()
+        except OSError:
+            raise GitError("git cat-file stopped before answering every request") from None
+        header = process.stdout.readline()
+        if not header:
+            raise GitError("git cat-file stopped before answering every request")
+        parts = header.split()
+        if len(parts) != 3:  # "<name> missing" or "<name> ambiguous"
+            return None
+        size = int(parts[2])
+        data = process.stdout.read(size)
+        process.stdout.read(1)  # the newline after the content
+        if len(data) != size:
+            raise GitError("git cat-file stopped before answering every request")
+        return parts[0].decode("ascii", "replace"), parts[1].decode("ascii", "replace"), data
+
+    def _started(self) -> subprocess.Popen[bytes]:
+        owner = (os.getpid(), threading.get_ident())
+        process = self._processes.get(owner)
+        if process is None:
+            try:
+                process = subprocess.Popen(
+                    _command(self.repository, ["cat-file", "--batch"]),
+                    stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.DEVNULL,
+                    env=_environment(),
+                )
+            except OSError as error:
+                raise GitUnavailable(error.strerror or str(error)) from None
+            self._processes[owner] = process
+        return process
+
+    def close(self) -> None:
+        """End the git processes this process started (those a parent started are its own)."""
+        pid = os.getpid()
+        for owner in [owner for owner in self._processes if owner[0] == pid]:
+            process = self._processes.pop(owner)
+            for stream in (process.stdin, process.stdout):
+                if stream is not None:
+                    stream.close()
+            process.wait()

@@ -377,7 +377,8 @@ def _audit_files(
         parse = file_parser(formats, digests=store is not None)
         # numpy is not imported meanwhile: lensaudit.scalar computes the metrics
         # of nearly every database as files are parsed, and numpy only the rest.
-        results = parse_all([job for _, job in jobs], parse, _nothing)
+        meanwhile = _nothing if store is None else _fingerprint
+        results = parse_all([job for _, job in jobs], parse, meanwhile)
         for (index, job), (digest, packed, count, error, file_metrics, texts) in zip(
             jobs, results, strict=True
         ):
@@ -429,6 +430,14 @@ def _audit_files(
 
 def _nothing() -> None:
     """What the caller does while workers parse: its share of the files, no more."""
+
+
+def _fingerprint() -> None:
+    """Compute what the cache will be saved under (it reads the package's
+    sources), while workers parse rather than before or after."""
+    from .cache import fingerprint
+
+    fingerprint()
 
 
 def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tuple]:

@@ -27,6 +27,7 @@ import marshal
 import os
 import stat as stat_module
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 try:  # BLAKE2 alone: hashlib would also load OpenSSL, a few ms a warm scan does not need
@@ -79,9 +80,11 @@ def code_digest(package: Path, patterns: tuple[str, ...]) -> str:
 class RecordFile:
     """One store file: ``<kind>-<name>.cache`` in ``directory``, valid for ``fingerprint``.
 
-    ``max_files`` and ``max_bytes`` bound the store files of the directory
-    after a write (and a file larger than ``max_bytes`` is neither read nor
-    written).
+    ``fingerprint`` may be given as a function that computes it, called once
+    the first time it is needed (a file that is not there is read without
+    it). ``max_files`` and ``max_bytes`` bound the store files of the
+    directory after a write (and a file larger than ``max_bytes`` is neither
+    read nor written).
     """
 
     def __init__(
@@ -89,7 +92,7 @@ class RecordFile:
         directory: Path,
         kind: str,
         name: str,
-        fingerprint: bytes,
+        fingerprint: bytes | Callable[[], bytes],
         *,
         max_files: int,
         max_bytes: int,
@@ -98,9 +101,16 @@ class RecordFile:
             raise ValueError(f"unknown store kind {kind!r}")
         self.kind = kind
         self.path = directory / f"{kind}-{name}{SUFFIX}"
-        self.fingerprint = fingerprint
+        self._fingerprint = fingerprint
         self.max_files = max_files
         self.max_bytes = max_bytes
+
+    @property
+    def fingerprint(self) -> bytes:
+        """What the file's value is valid for."""
+        if callable(self._fingerprint):
+            self._fingerprint = self._fingerprint()
+        return self._fingerprint
 
     def read(self) -> object:
         """The value stored, or None if the file is missing, damaged, of another

@@ -38,25 +38,59 @@ _MAX_TASKS = 1024
 
 @dataclass(slots=True)
 class Job:
-    """A file to parse: its absolute path, display name, and its bytes if already read."""
+    """A file to parse: its absolute path, display name, and its bytes if already
+    read; ``size``, if given, is the number of bytes it will have when read
+    (for contents that are not files, such as git objects)."""
 
     path: Path
     name: str
     data: bytes | None = None
+    size: int | None = None
 
 
-def parse_all(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[], Any]) -> list[T]:
+def parse_all(
+    jobs: list[Job],
+    parse: Callable[[Job], T],
+    meanwhile: Callable[[], Any],
+    progress: Callable[[int, int], None] | None = None,
+) -> list[T]:
     """``[parse(job) for job in jobs]``, computed while ``meanwhile()`` runs here.
 
     ``parse`` must be deterministic and its results :mod:`marshal` data, as
     it may run in a forked process. Exceptions of ``meanwhile`` and of
-    ``parse`` (as met in this process) are raised.
+    ``parse`` (as met in this process) are raised. ``progress(done, total)``,
+    if given, is called in this process as jobs are taken up (by any
+    process), and once all are done.
     """
     sizes = [_size(job) for job in jobs] if jobs and _can_fork() else []
     workers = min(_cpus() - 1, len(jobs) - 1, MAX_WORKERS) if sum(sizes) >= MIN_BYTES else 0
     if workers < 1:
-        return _in_thread(jobs, parse, meanwhile)
-    return _in_processes(jobs, sizes, workers, parse, meanwhile)
+        results = _in_thread(jobs, parse, meanwhile, progress)
+    else:
+        results = _in_processes(jobs, sizes, workers, parse, meanwhile, progress)
+    if progress is not None and jobs:
+        progress(len(jobs), len(jobs))
+    return results
+
+
+def in_parallel(tasks: list[Callable[[], T]]) -> list[T]:
+    """``[task() for task in tasks]``, the tasks shared between this process and
+    forked workers where that is safe and more than one CPU is free, else run
+    one after another here (never in threads: a task may use what a thread
+    must not share). Results must be :mod:`marshal` data; a task whose worker
+    fails runs here."""
+    workers = min(_cpus() - 1, len(tasks) - 1, MAX_WORKERS)
+    if workers < 1 or not _can_fork():
+        return [task() for task in tasks]
+    jobs = [Job(Path(str(index)), str(index), size=MIN_BYTES) for index in range(len(tasks))]
+    return _in_processes(
+        jobs,
+        [MIN_BYTES] * len(jobs),
+        workers,
+        lambda job: tasks[int(job.name)](),
+        lambda: None,
+        None,
+    )
 
 
 def _can_fork() -> bool:
@@ -81,13 +115,20 @@ def _cpus() -> int:
 def _size(job: Job) -> int:
     if job.data is not None:
         return len(job.data)
+    if job.size is not None:
+        return job.size
     try:
         return os.stat(job.path).st_size
     except OSError:
         return 0
 
 
-def _in_thread(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[], Any]) -> list[T]:
+def _in_thread(
+    jobs: list[Job],
+    parse: Callable[[Job], T],
+    meanwhile: Callable[[], Any],
+    progress: Callable[[int, int], None] | None,
+) -> list[T]:
     if not jobs:
         meanwhile()
         return []
@@ -97,7 +138,12 @@ def _in_thread(jobs: list[Job], parse: Callable[[Job], T], meanwhile: Callable[[
 
     def work() -> None:
         try:
-            outcome["result"] = [parse(job) for job in jobs]
+            results = []
+            for job in jobs:
+                results.append(parse(job))
+                if progress is not None:  # this thread alone reports
+                    progress(len(results), len(jobs))
+            outcome["result"] = results
         except BaseException as error:  # handed to the caller, not lost in the thread
             outcome["error"] = error
 
@@ -118,6 +164,7 @@ def _in_processes(
     workers: int,
     parse: Callable[[Job], T],
     meanwhile: Callable[[], Any],
+    progress: Callable[[int, int], None] | None,
 ) -> list[T]:
     # Largest first, so that the last pieces, taken by whoever is free, are small.
     order = sorted(range(len(jobs)), key=sizes.__getitem__, reverse=True)
@@ -141,8 +188,11 @@ def _in_processes(
             os.close(output_input)
             children[pid] = output
         meanwhile()
+        taken = _taken(queue, tasks) if progress is not None else None
         for index in _take(queue, tasks):
             results[index] = parse(jobs[index])
+            if taken is not None:
+                progress(taken(), len(jobs))
         for pid, output in list(children.items()):
             results.update(_collect(output))
             os.close(output)
@@ -163,6 +213,26 @@ def _widen(pipe: int) -> None:
         fcntl.fcntl(pipe, fcntl.F_SETPIPE_SZ, 1 << 20)
     except (ImportError, AttributeError, OSError):
         pass
+
+
+def _taken(queue: int, tasks: list[list[int]]) -> Callable[[], int]:
+    """How many jobs have been taken from the queue so far, by any process: tasks
+    are taken in order, and the bytes left in the pipe tell how many remain."""
+    import fcntl
+    import termios
+    from itertools import accumulate
+
+    before = [0, *accumulate(map(len, tasks))]  # jobs in the tasks before each
+    left = bytearray(4)
+
+    def count() -> int:
+        try:
+            fcntl.ioctl(queue, termios.FIONREAD, left)
+        except OSError:
+            return 0
+        return before[len(tasks) - int.from_bytes(left, sys.byteorder) // 4]
+
+    return count
 
 
 def _take(queue: int, tasks: list[list[int]]) -> Iterator[int]:

@@ -161,8 +161,15 @@ def audit_history(
     cached = len(audits)
     keep = set(newest_files.values())
     to_parse = [b for b in every_blob if b not in audits or b in keep]
-    contents = blobs.read_blobs(git, to_parse, progress)
-    parsed = parse.parse_blobs(contents, names, keep, auditor)
+    sizes = git.object_sizes(to_parse)
+    missing = next((blob for blob, size in zip(to_parse, sizes, strict=True) if size is None), None)
+    if missing is not None:
+        raise HistoryError(f"git cannot read object {missing} of {git.repository}")
+    reader = git.blob_reader()
+    try:
+        parsed = parse.parse_blobs(to_parse, sizes, names, keep, auditor, reader, progress)
+    finally:
+        reader.close()
     fresh = auditor.finish(parsed)
     if cache:
         cache.put({blob: a for blob, a in fresh.items() if blob not in audits}, every_blob)

@@ -1,12 +1,12 @@
 """Stage 2, blobs: which file versions (git blobs) make up the database at each
-commit, and their contents, all through one ``git cat-file --batch``."""
+commit, through one ``git cat-file --batch`` (their contents are read by the
+parse stage, in whichever process parses each)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import PurePosixPath
 
-from .commits import Git, HistoryError
+from .commits import Git
 
 
 def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
@@ -51,18 +51,3 @@ def file_maps(
         else:
             maps[commit] = {}
     return maps, present
-
-
-def read_blobs(
-    git: Git, blobs: list[str], progress: Callable[[int, int], None] | None = None
-) -> dict[str, bytes]:
-    """{blob id: content} of file versions, through one ``git cat-file --batch``;
-    ``progress(done, total)`` is called as they come."""
-    contents: dict[str, bytes] = {}
-    for done, (blob, answer) in enumerate(zip(blobs, git.objects(blobs), strict=True), 1):
-        if answer is None:
-            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
-        contents[blob] = answer[2]
-        if progress is not None:
-            progress(done, len(blobs))
-    return contents

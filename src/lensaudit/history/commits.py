@@ -84,6 +84,45 @@ class Git:
         except gitlayer.GitError as error:
             raise HistoryError(str(error)) from None
 
+    def object_sizes(self, names: Sequence[str]) -> list[int | None]:
+        """The size of each object named, or None (see :func:`lensaudit.git.object_sizes`)."""
+        try:
+            return gitlayer.object_sizes(self.repository, names)
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(f"cannot run git: {error}") from None
+        except gitlayer.GitError as error:
+            raise HistoryError(str(error)) from None
+
+    def blob_reader(self) -> BlobReader:
+        """Contents of blobs, one at a time, from a git process of the calling
+        process's own (see :class:`lensaudit.git.ObjectReader`)."""
+        return BlobReader(self)
+
+
+class BlobReader:
+    """The contents of blobs of a repository, read as they are asked for, in any
+    process (a forked worker starts its own git); git's failures as :class:`HistoryError`."""
+
+    def __init__(self, git: Git) -> None:
+        self.git = git
+        self._reader = gitlayer.ObjectReader(git.repository)
+
+    def read(self, blob: str) -> bytes:
+        """The content of the blob ``blob``; HistoryError if git cannot give it."""
+        try:
+            answer = self._reader.read(blob)
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(f"cannot run git: {error}") from None
+        except gitlayer.GitError as error:
+            raise HistoryError(str(error)) from None
+        if answer is None:
+            raise HistoryError(f"git cannot read object {blob} of {self.git.repository}")
+        return answer[2]
+
+    def close(self) -> None:
+        """End the git process of the calling process, if any."""
+        self._reader.close()
+
 
 def normalized_path(path: str) -> str:
     """``path`` inside the repository in git's form (``a/b``); HistoryError if it

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import threading
 from collections.abc import Callable, Sequence
 from operator import attrgetter
 from pathlib import Path
@@ -20,6 +21,7 @@ from ..loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
 
 if TYPE_CHECKING:
     from .audit import Auditor, Parsed
+    from .commits import BlobReader
 
 
 def _coefficient_getter(names: tuple[str, ...]) -> Callable[[DistortionEntry], tuple]:
@@ -182,28 +184,49 @@ def parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> Pieces:
 
 
 def parse_blobs(
-    contents: dict[str, bytes], names: dict[str, str], keep: set[str], auditor: Auditor
+    blobs: Sequence[str],
+    sizes: Sequence[int],
+    names: dict[str, str],
+    keep: set[str],
+    auditor: Auditor,
+    reader: BlobReader,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Parsed]:
-    """Parse file versions (``contents`` by blob id, ``names`` their file names) in
-    worker processes (:mod:`lensaudit.workers`) while this process parses those
-    whose entries are kept (``keep``, the newest revision's)."""
+    """Parse file versions (``blobs``, of ``sizes`` bytes, ``names`` their file names)
+    in worker processes (:mod:`lensaudit.workers`) while this process parses
+    those whose entries are kept (``keep``, the newest revision's). Each
+    process reads what it parses through ``reader``, as it goes, so that
+    reading overlaps parsing and no process holds every version at once.
+    ``progress(done, total)`` is called as file versions are taken up."""
     from .. import workers
 
-    others = [blob for blob in contents if blob not in keep]
-    jobs = [workers.Job(Path(names[blob]), names[blob], contents[blob]) for blob in others]
+    others = [(blob, size) for blob, size in zip(blobs, sizes, strict=True) if blob not in keep]
+    jobs = [workers.Job(Path(blob), names[blob], size=size) for blob, size in others]
     seen: dict[bytes, bool] = {}  # pieces parsed, per process (each worker has its copy)
     parsed: dict[str, Parsed] = {}
+    kept = [blob for blob in blobs if blob in keep]
+    done = [0, 0]  # kept, others (the others' count may come from another thread)
+    reporting = threading.Lock()
+
+    def report(others: int = -1, _: int = 0) -> None:
+        with reporting:
+            if others >= 0:
+                done[1] = max(done[1], others)
+            if progress is not None:
+                progress(sum(done), len(kept) + len(jobs))
 
     def parse_kept() -> None:
-        for blob in contents:
-            if blob in keep:
-                parsed[blob] = auditor.parse(contents[blob], names[blob], keep=True)
+        for blob in kept:
+            parsed[blob] = auditor.parse(reader.read(blob), names[blob], keep=True)
+            done[0] += 1
+            report()
 
-    results = workers.parse_all(
-        jobs, lambda job: parse_blob(job.data or b"", job.name, seen), parse_kept
-    )
+    def parse_other(job: workers.Job) -> Pieces:
+        return parse_blob(reader.read(job.path.name), job.name, seen)
+
+    results = workers.parse_all(jobs, parse_other, parse_kept, report)
     for result in results:
         auditor.add_pieces(result[2])
-    for blob, result in zip(others, results, strict=True):
+    for (blob, _), result in zip(others, results, strict=True):
         parsed[blob] = auditor.assemble(result)
     return parsed
