@@ -31,10 +31,14 @@ class _FileState:
 
     def introducer(self, ident: int) -> int | None:
         """Introducer of the first entry with this identity, or None."""
+        return self.index().get(ident)
+
+    def index(self) -> dict[int, int]:
+        """Identity -> introducer of the first entry with it."""
         if self._index is None:
             # Built reversed, so that the first occurrence of an identity wins.
             self._index = dict(zip(reversed(self.idents), reversed(self.introducers), strict=True))
-        return self._index.get(ident)
+        return self._index
 
 
 _State = dict[str, _FileState]
@@ -49,11 +53,11 @@ def _find_introducer(ident: int, path: str, parents: list[_State]) -> int | None
             found = same.introducer(ident)
             if found is not None:
                 return found
-        for name, state in parent.items():
-            if name != path:
-                found = state.introducer(ident)
-                if found is not None:
-                    return found
+        # The other files in order (the same one, searched above, holds no such entry).
+        for index in map(_FileState.index, parent.values()):
+            found = index.get(ident)
+            if found is not None:
+                return found
     return None
 
 
@@ -76,10 +80,17 @@ def _next_state(
                 blob, carried.idents if carried else (), carried.introducers if carried else ()
             )
             continue
-        introducers = []
-        for ident in audit.idents:
-            found = _find_introducer(ident, path, parents)
-            introducers.append(index if found is None else found)
+        # Most entries of a changed file are those of its previous version: found
+        # there first (where _find_introducer looks first), the others searched.
+        introducers = list(map(previous.index().get, audit.idents)) if previous else []
+        if len(introducers) != len(audit.idents) or None in introducers:
+            introducers = [
+                found if found is not None else _find_introducer(ident, path, parents)
+                for ident, found in zip(
+                    audit.idents, introducers or [None] * len(audit.idents), strict=True
+                )
+            ]
+            introducers = [index if found is None else found for found in introducers]
         state[path] = _FileState(blob, audit.idents, tuple(introducers))
     return state
 
