@@ -14,7 +14,7 @@ import threading
 from collections.abc import Callable, Sequence
 from operator import attrgetter
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .. import loader
 from ..loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
@@ -78,6 +78,9 @@ def summarize(entries: Sequence[DistortionEntry]) -> Summary:
     return len(entries), identities, keys, rectilinear
 
 
+#: What ``seen`` gives for a piece not parsed yet (see :func:`parse_blob`).
+_UNSEEN: Any = object()
+
 #: The top-level elements a file version is cut into: lenses, cameras, mounts.
 _PIECE = re.compile(rb"<(lens|camera|mount)>")
 _PLACEHOLDER_TAG = "lensaudit-piece"
@@ -112,7 +115,7 @@ def _piece_spans(data: bytes) -> list[tuple[int, int]]:
     return spans
 
 
-def parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> Pieces:
+def parse_blob(data: bytes, name: str, seen: dict[bytes, bytes | None]) -> Pieces:
     """What one file version holds, reading each distinct piece of it once.
 
     Successive versions of a file share most of their lenses, so the file is
@@ -122,8 +125,10 @@ def parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> Pieces:
     as a ``<lensdatabase>`` whose children include exactly those
     placeholders, and each piece must parse alone; then the file is
     well-formed and its entries are those of its pieces in order, since an
-    entry's context comes from its own ``<lens>``. ``seen`` maps the digests
-    of the pieces this process has parsed to whether they parsed. A file
+    entry's context comes from its own ``<lens>``. ``seen`` maps the pieces
+    this process has parsed (their bytes: a dictionary lookup hashes them
+    faster than a digest would) to their digest, or None if they did not
+    parse. A file
     that does not qualify (not well-formed, namespaces, declarations in its
     document type, an encoding other than UTF-8, entries outside the pieces)
     is read whole, as the loader reads it.
@@ -167,17 +172,18 @@ def parse_blob(data: bytes, name: str, seen: dict[bytes, bool]) -> Pieces:
     digests = []
     for start, end in spans:
         piece = data[start:end]
-        digest = hashlib.blake2b(piece, digest_size=16).digest()
-        parsed = seen.get(digest)
-        if parsed is None:
+        digest = seen.get(piece, _UNSEEN)
+        if digest is _UNSEEN:
             try:
                 element = etree.fromstring(b"<lensdatabase>" + piece + b"</lensdatabase>", parser)
             except etree.XMLSyntaxError:
                 element = None
-            seen[digest] = parsed = element is not None
+            digest = None
             if element is not None:
+                digest = hashlib.blake2b(piece, digest_size=16).digest()
                 made.append((digest, summarize(list(loader.entries_from_tree(element, name)))))
-        if not parsed:
+            seen[piece] = digest
+        if digest is None:
             return whole()
         digests.append(digest)
     return "", digests, made
@@ -202,7 +208,7 @@ def parse_blobs(
 
     others = [(blob, size) for blob, size in zip(blobs, sizes, strict=True) if blob not in keep]
     jobs = [workers.Job(Path(blob), names[blob], size=size) for blob, size in others]
-    seen: dict[bytes, bool] = {}  # pieces parsed, per process (each worker has its copy)
+    seen: dict[bytes, bytes | None] = {}  # pieces parsed, per process (each worker has its own)
     parsed: dict[str, Parsed] = {}
     kept = [blob for blob in blobs if blob in keep]
     done = [0, 0]  # kept, others (the others' count may come from another thread)
