@@ -17,24 +17,13 @@ from hypothesis import strategies as st
 from lensaudit import metrics, scalar, solver
 from lensaudit.columns import METRIC_COLUMNS
 from lensaudit.pipeline import run
+from test_solver_range import any_double, spread_double
 
-#: Any finite double: hypothesis favours zeros, subnormals and the extremes.
-any_double = st.floats(allow_nan=False, allow_infinity=False)
 #: Coefficients of the size real lenses have, of either sign.
 lens_sized = st.one_of(
     st.just(0.0),
     st.floats(-2.0, 2.0, allow_subnormal=False),
     st.builds(lambda m, e: math.ldexp(m, e), st.floats(-1.0, 1.0), st.integers(-40, 8)),
-)
-#: Exponents uniform over the whole range, subnormals included.
-spread_double = st.one_of(
-    st.just(0.0),
-    st.builds(
-        lambda sign, mantissa, exponent: sign * math.ldexp(mantissa, exponent),
-        st.sampled_from([-1.0, 1.0]),
-        st.floats(0.5, 1.0, exclude_max=True),
-        st.integers(-1074, 1023),
-    ),
 )
 
 

@@ -131,6 +131,20 @@ def log(
     return run(repository, *arguments).decode("ascii").split()
 
 
+def _cat_file(repository: str | os.PathLike[str]) -> subprocess.Popen[bytes]:
+    """A ``git cat-file --batch`` of ``repository``, its input and output piped here."""
+    try:
+        return subprocess.Popen(
+            _command(repository, ["cat-file", "--batch"]),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            env=_environment(),
+        )
+    except OSError as error:
+        raise GitUnavailable(error.strerror or str(error)) from None
+
+
 def objects(
     repository: str | os.PathLike[str], names: Sequence[str | bytes]
 ) -> Iterator[tuple[str, str, bytes] | None]:
@@ -145,16 +159,7 @@ def objects(
     """
     if not names:
         return
-    try:
-        process = subprocess.Popen(
-            _command(repository, ["cat-file", "--batch"]),
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            env=_environment(),
-        )
-    except OSError as error:
-        raise GitUnavailable(error.strerror or str(error)) from None
+    process = _cat_file(repository)
     assert process.stdin is not None and process.stdout is not None
     requests = b"".join(
         (name if isinstance(name, bytes) else name.encode("utf-8", "surrogateescape")) + b"\n"
@@ -251,17 +256,7 @@ class ObjectReader:
         owner = (os.getpid(), threading.get_ident())
         process = self._processes.get(owner)
         if process is None:
-            try:
-                process = subprocess.Popen(
-                    _command(self.repository, ["cat-file", "--batch"]),
-                    stdin=subprocess.PIPE,
-                    stdout=subprocess.PIPE,
-                    stderr=subprocess.DEVNULL,
-                    env=_environment(),
-                )
-            except OSError as error:
-                raise GitUnavailable(error.strerror or str(error)) from None
-            self._processes[owner] = process
+            process = self._processes[owner] = _cat_file(self.repository)
         return process
 
     def close(self) -> None:

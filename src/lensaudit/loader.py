@@ -163,11 +163,13 @@ def parse_aspect_ratio(text: str) -> float:
     return value
 
 
-def make_parser() -> etree.XMLParser:
-    """An lxml parser that never touches the network, DTDs or entities."""
+def make_parser(target: object = None) -> etree.XMLParser:
+    """An lxml parser that never touches the network, DTDs or entities (with
+    ``target``, one that hands what it reads to that parser target)."""
     from lxml import etree
 
     return etree.XMLParser(
+        target=target,
         resolve_entities=False,
         no_network=True,
         load_dtd=False,
@@ -664,18 +666,8 @@ def _distortion_file(data: bytes) -> ParsedFile:
         or (declared is not None and declared.group(1).lower() not in (b"utf-8", b"utf8"))
     ):
         return parse_file(data)
-    checker = etree.XMLParser(
-        target=_Nothing(),
-        resolve_entities=False,
-        no_network=True,
-        load_dtd=False,
-        dtd_validation=False,
-        huge_tree=False,
-        remove_pis=True,
-        collect_ids=False,
-    )
     try:
-        etree.fromstring(data, checker)
+        etree.fromstring(data, make_parser(_Nothing()))
         root = etree.fromstring(_CALIBRATION_ELEMENT.sub(b"", data), make_parser())
     except etree.XMLSyntaxError:
         return parse_file(data)  # and its message
