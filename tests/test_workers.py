@@ -166,3 +166,42 @@ def test_tasks_that_cannot_be_forked_run_here_one_after_another(monkeypatch):
         [lambda n=n: (n, os.getpid(), threading.active_count()) for n in range(3)]
     )
     assert found == [(n, parent, running) for n in range(3)]
+
+
+def _results_pipe(data: bytes) -> int:
+    read, write = os.pipe()
+    os.write(write, data)
+    os.close(write)
+    return read
+
+
+@pytest.mark.parametrize(
+    "sent",
+    [
+        b"",  # the worker died before writing
+        (2).to_bytes(8, "little") + (5).to_bytes(8, "little"),  # sizes cut short
+        (1).to_bytes(8, "little") + (9).to_bytes(8, "little") + b"abc",  # a result cut short
+        (1).to_bytes(8, "little") + (3).to_bytes(8, "little") + b"\xff\xfe\xfd",  # not marshal
+        (1 << 62).to_bytes(8, "little"),  # an absurd count
+    ],
+)
+def test_results_that_are_cut_short_or_garbled_count_as_none(sent):
+    source = _results_pipe(sent)
+    try:
+        assert workers._collect(source) == {}
+    finally:
+        os.close(source)
+
+
+def test_results_are_read_back_as_a_worker_writes_them():
+    import marshal
+
+    done = [marshal.dumps((index, {"x": "y" * index})) for index in (3, 0, 7)]
+    read, write = os.pipe()
+    sizes = b"".join(len(result).to_bytes(8, "little") for result in done)
+    workers._write_all(write, [len(done).to_bytes(8, "little"), sizes, *done])
+    os.close(write)
+    try:
+        assert workers._collect(read) == {3: {"x": "yyy"}, 0: {"x": ""}, 7: {"x": "y" * 7}}
+    finally:
+        os.close(read)

@@ -23,6 +23,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from itertools import accumulate
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
@@ -34,6 +35,10 @@ MIN_BYTES = 256 * 1024
 MAX_WORKERS = 8
 #: Pieces of work at most: 4 bytes each in the queue, which must fit in a pipe at once.
 _MAX_TASKS = 1024
+#: Results a worker can send back at most (one per job; a guard against garbage).
+_MAX_RESULTS = 1 << 24
+#: Buffers one os.writev call takes at most (the system's IOV_MAX is at least 1024).
+_IOV_MAX = 1024
 
 
 @dataclass(slots=True)
@@ -253,10 +258,11 @@ def _work(
         import gc
 
         gc.disable()  # a short life, ended by os._exit: nothing to collect
-        done = [(index, parse(jobs[index])) for index in _take(queue, tasks)]
-        data = memoryview(marshal.dumps(done))
-        while data:
-            data = data[os.write(output, data) :]
+        # Each result marshalled as soon as it is made, not all at the end,
+        # when the caller is waiting for them.
+        done = [marshal.dumps((index, parse(jobs[index]))) for index in _take(queue, tasks)]
+        sizes = b"".join(len(result).to_bytes(8, "little") for result in done)
+        _write_all(output, [len(done).to_bytes(8, "little"), sizes, *done])
         # Closed now, not at exit: the caller reads to the end of the pipe,
         # which would otherwise wait for this process's memory to be freed.
         os.close(output)
@@ -269,16 +275,53 @@ def _work(
         os._exit(code)
 
 
+def _write_all(output: int, pieces: list[bytes]) -> None:
+    """Write ``pieces`` to ``output`` in order, without joining them first."""
+    views = [memoryview(piece) for piece in pieces if piece]
+    while views:
+        written = os.writev(output, views[:_IOV_MAX])
+        while views and written >= len(views[0]):
+            written -= len(views.pop(0))
+        if written:
+            views[0] = views[0][written:]
+
+
 def _collect(output: int) -> dict[int, Any]:
-    """The results a worker sent: job index -> result; empty if it failed."""
-    chunks = []
-    while chunk := os.read(output, 1 << 20):
-        chunks.append(chunk)
+    """The results a worker sent: job index -> result; empty if it failed.
+
+    The worker sends their number, their sizes, then each as :mod:`marshal`
+    data; they are read into one buffer, unmarshalled piece by piece.
+    """
+    head = _read_exactly(output, bytearray(8))
+    count = int.from_bytes(head, "little") if head is not None else -1
+    sizes = _read_exactly(output, bytearray(8 * count)) if 0 <= count <= _MAX_RESULTS else None
+    if sizes is None:
+        return {}
+    ends = list(
+        accumulate(int.from_bytes(sizes[i : i + 8], "little") for i in range(0, len(sizes), 8))
+    )
+    buffer = _read_exactly(output, bytearray(ends[-1] if ends else 0))
+    if buffer is None:
+        return {}
+    view = memoryview(buffer)
     try:
-        done = marshal.loads(b"".join(chunks))
-        return {index: result for index, result in done}
+        return dict(
+            marshal.loads(view[start:end]) for start, end in zip([0, *ends[:-1]], ends, strict=True)
+        )
     except (EOFError, ValueError, TypeError):
         return {}
+
+
+def _read_exactly(source: int, buffer: bytearray) -> bytearray | None:
+    """``buffer`` filled from ``source``, or None if it ends first."""
+    view = memoryview(buffer)
+    position = 0
+    while position < len(buffer):
+        count = os.readv(source, [view[position:]])
+        if count == 0:
+            return None
+        position += count
+    return buffer
 
 
 def _stop(children: dict[int, int]) -> None:
