@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any
+
     import pandas
 
 __all__ = ["__version__", "audit", "min_positive_root", "run"]

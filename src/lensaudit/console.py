@@ -22,7 +22,11 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn, TextIO
+
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import NoReturn, TextIO
 
 #: Exit status for bad usage or input that could not be read at all.
 EXIT_INPUT_ERROR = 2

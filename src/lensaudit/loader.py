@@ -21,9 +21,12 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, replace
 from operator import itemgetter
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any, Protocol
+
     from lxml import etree
 
 #: Distortion models lensaudit knows how to audit, and the coefficient
@@ -821,19 +824,23 @@ def read_file(path: str | os.PathLike[str]) -> bytes:
         return stream.read()
 
 
-class EntryCache(Protocol):
-    """Where :func:`load_files` may find files parsed before (see lensaudit.cache).
+if TYPE_CHECKING:  # what load_files needs of a cache, for type checkers
 
-    Both methods are given the bytes :func:`load_files` read, so that a file
-    is read once and what is stored was parsed from the very bytes it is
-    stored under.
-    """
+    class EntryCache(Protocol):
+        """Where :func:`load_files` may find files parsed before (see lensaudit.cache).
 
-    def get(
-        self, path: Path, data: bytes, name: str
-    ) -> tuple[list[DistortionEntry], str] | None: ...
+        Both methods are given the bytes :func:`load_files` read, so that a file
+        is read once and what is stored was parsed from the very bytes it is
+        stored under.
+        """
 
-    def put(self, path: Path, data: bytes, entries: list[DistortionEntry], error: str) -> None: ...
+        def get(
+            self, path: Path, data: bytes, name: str
+        ) -> tuple[list[DistortionEntry], str] | None: ...
+
+        def put(
+            self, path: Path, data: bytes, entries: list[DistortionEntry], error: str
+        ) -> None: ...
 
 
 def expand(

@@ -25,7 +25,6 @@ from functools import cached_property, partial
 from itertools import accumulate
 from operator import attrgetter
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 from . import database, loader
 from .columns import (
@@ -45,7 +44,11 @@ from .loader import STATUS_OK, DistortionEntry, SourceFile
 # numpy (and so the metrics) is imported where it is first needed, so that
 # run() can parse the database while numpy is still being imported, and
 # scan an unchanged one without it.
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any
+
     import numpy as np
     import pandas
 
@@ -341,15 +344,13 @@ def _audit_files(
 ) -> Audit:
     """The audit of ``targets``: from the cache ``store`` where it knows the
     content, parsed (in workers, while numpy imports) where not."""
-    from .workers import Job, parse_all
-
     size = len(targets)
     files: list[SourceFile] = []
     parts: list[FileColumns] = []
     metrics: list[dict[str, list] | None] = [None] * size
     digests: list[bytes | None] = [None] * size
     cached_rows: list[frozenset[str]] = [frozenset()] * size
-    jobs: list[tuple[int, Job]] = []
+    jobs: list[tuple[int, tuple[Path, str, bytes | None]]] = []  # (index, job's fields)
     for index, (path, name) in enumerate(targets):  # paths resolved by loader.expand
         data = None
         if store is not None and store.knows(path):
@@ -371,16 +372,20 @@ def _audit_files(
                     continue
         files.append(SourceFile(name, path, 0))  # placeholders, replaced below
         parts.append(FileColumns({}, 0))
-        jobs.append((index, Job(path, name, data)))
+        jobs.append((index, (path, name, data)))
 
     if jobs:
         parse = file_parser(formats, digests=store is not None)
         # numpy is not imported meanwhile: lensaudit.scalar computes the metrics
         # of nearly every database as files are parsed, and numpy only the rest.
         meanwhile = _nothing if store is None else _fingerprint
-        results = parse_all([job for _, job in jobs], parse, meanwhile)
-        for (index, job), (digest, packed, count, error, file_metrics, texts) in zip(
-            jobs, results, strict=True
+        # Imported only here: a scan that finds every file in the cache parses none.
+        from .workers import Job, parse_all
+
+        work = [Job(*fields) for _, fields in jobs]
+        results = parse_all(work, parse, meanwhile)
+        for (index, _), job, (digest, packed, count, error, file_metrics, texts) in zip(
+            jobs, work, results, strict=True
         ):
             files[index] = SourceFile(job.name, job.path, count, error)
             if file_metrics is None:

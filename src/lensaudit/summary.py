@@ -10,11 +10,14 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 from itertools import compress
-from typing import TYPE_CHECKING, Any
 
 from .loader import MODEL_COEFFICIENTS, STATUS_OK
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any
+
     from .pipeline import Audit
 
 MODELS = tuple(MODEL_COEFFICIENTS)

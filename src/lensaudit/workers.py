@@ -25,9 +25,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from itertools import accumulate
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar
 
-T = TypeVar("T")
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any, NoReturn, TypeVar
+
+    T = TypeVar("T")
 
 #: Below this many bytes to parse, a worker costs more than it saves.
 MIN_BYTES = 256 * 1024

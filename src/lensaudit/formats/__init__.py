@@ -15,12 +15,15 @@ from collections.abc import Callable
 from importlib import import_module
 from itertools import chain
 from types import ModuleType
-from typing import TYPE_CHECKING, TextIO
 
 from ..columns import LEADING_COLUMNS, METRIC_COLUMNS, TRAILING_COLUMNS
 from ..loader import STATUS_OK
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import TextIO
+
     from ..pipeline import Audit
 
 #: Format name -> module under lensaudit.formats.

@@ -15,7 +15,6 @@ concatenation.
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING, TextIO
 
 from ..columns import (
     COLUMNS,
@@ -27,7 +26,11 @@ from ..columns import (
 )
 from . import interleaved, metric_fields, split_rows
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import TextIO
+
     from ..pipeline import Audit
 
 _BOOLEAN = {True: "true", False: "false", None: ""}

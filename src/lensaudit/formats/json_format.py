@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 from json.encoder import encode_basestring_ascii
-from typing import TYPE_CHECKING, Any, TextIO
 
 from .. import __version__
 from ..columns import (
@@ -33,7 +32,11 @@ from ..columns import (
 )
 from . import interleaved, metric_fields, split_rows
 
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any, TextIO
+
     from ..pipeline import Audit
 
 # An entry is a line of its own, two levels down the document: indented by 2,
