@@ -11,13 +11,12 @@ types, namespaces and encodings around the elements it removes.
 from __future__ import annotations
 
 import random
-import subprocess
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from conftest import GIT_ENVIRONMENT, HISTORY_BUNDLE
+from history_blobs import file_versions
 from lensaudit import loader
 from test_fuzz_mutations import MUTATIONS, ORIGINAL, SETTINGS
 
@@ -46,42 +45,10 @@ def test_the_cut_leaves_no_calibration_element_and_every_line(bundled_db):
 
 
 def test_file_versions_across_lensfuns_history_read_as_the_whole_tree(tmp_path):
-    if not HISTORY_BUNDLE.is_file():
-        pytest.skip(f"no Lensfun history bundle at {HISTORY_BUNDLE}")
-    clone = tmp_path / "lensfun"
-    subprocess.run(
-        ["git", "clone", "--quiet", "--bare", str(HISTORY_BUNDLE), str(clone)],
-        check=True,
-        capture_output=True,
-    )
-
-    def git(*arguments: str, stdin: bytes | None = None) -> bytes:
-        done = subprocess.run(
-            ["git", "-C", str(clone), *arguments],
-            input=stdin,
-            check=True,
-            capture_output=True,
-            env=GIT_ENVIRONMENT,
-        )
-        return done.stdout
-
-    commits = git("rev-list", "HEAD", "--", "data/db").split()
-    blobs = set()
-    for commit in commits[:: max(1, len(commits) // 25)]:
-        for line in git("ls-tree", commit.decode(), "data/db/").splitlines():
-            mode_type_oid, _, name = line.partition(b"\t")
-            if name.endswith(b".xml"):
-                blobs.add(mode_type_oid.split()[2])
-    answer = git("cat-file", "--batch", stdin=b"".join(blob + b"\n" for blob in sorted(blobs)))
-    checked, position = 0, 0
-    while position < len(answer):
-        header_end = answer.index(b"\n", position)
-        size = int(answer[position:header_end].split()[2])
-        data = answer[header_end + 1 : header_end + 1 + size]
-        position = header_end + 2 + size
+    versions = file_versions(tmp_path)
+    for data in versions:
         assert_reads_as_whole(data)
-        checked += 1
-    assert checked == len(blobs) > 100
+    assert len(versions) > 100
 
 
 #: Text that changes what the cut may remove, or how the file must be read.

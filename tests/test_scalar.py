@@ -14,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lensaudit import metrics, scalar, solver
+from history_blobs import file_versions
+from lensaudit import loader, metrics, scalar, solver
 from lensaudit.columns import METRIC_COLUMNS
 from lensaudit.pipeline import run
 from test_solver_range import any_double, spread_double
@@ -104,22 +105,29 @@ def assert_same_metrics(entries: list[tuple]) -> int:
     return answered
 
 
+def audited_entries(entries: list[loader.DistortionEntry]) -> list[tuple]:
+    """(model, a, b, c, k1, k2, crop, aspect, focal, circular) of each audited entry."""
+    return [
+        (e.model, e.a, e.b, e.c, e.k1, e.k2, e.crop_factor, e.aspect_ratio, e.focal)
+        + (metrics.is_circular_fisheye(e.lens, e.type),)
+        for e in entries
+        if e.status == loader.STATUS_OK
+    ]
+
+
 def test_every_entry_of_the_bundled_database_is_answered_as_the_array_code_does(bundled_db):
-    audit = run(bundled_db)
-    names = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
-    columns = [audit.column(name) for name in names]
-    circular = [
-        metrics.is_circular_fisheye(lens, kind)
-        for lens, kind in zip(audit.column("lens"), audit.column("type"), strict=True)
-    ]
-    ok = [status == "ok" for status in audit.column("status")]
-    entries = [
-        (*row, flag)
-        for row, flag, audited in zip(zip(*columns, strict=True), circular, ok, strict=True)
-        if audited
-    ]
+    entries = audited_entries(run(bundled_db).entries)
     # Every one is answered: a scan of the bundled database needs no numpy.
     assert assert_same_metrics(entries) == len(entries) > 5000
+
+
+def test_entries_across_lensfuns_history_are_answered_as_the_array_code_does(tmp_path):
+    found = set()
+    for data in file_versions(tmp_path):
+        found.update(audited_entries(loader.read_bytes(data, "version.xml")[0]))
+    entries = sorted(found, key=repr)
+    # Nearly all are answered (the others are left to the array code, as allowed).
+    assert assert_same_metrics(entries) > 0.99 * len(entries) > 5000
 
 
 unused = st.just(math.nan)

@@ -12,9 +12,10 @@ another path (an uncertain sign, a root to polish, coefficients near the
 ends of the binary64 range, an overflow on the way), it answers None, and
 the caller computes that entry with :func:`lensaudit.metrics.compute`.
 
-tests/test_scalar.py holds it to the array code bit for bit, on every entry
-of the bundled database and of the Lensfun history, and on coefficients
-drawn from the whole binary64 range.
+tests/test_scalar.py holds it to the array code bit for bit: on every entry
+of the bundled database and of file versions across the Lensfun history (it
+answers every one of them), and on coefficients drawn from the whole
+binary64 range.
 """
 
 from __future__ import annotations
