@@ -224,3 +224,21 @@ def test_files_with_an_entry_left_to_the_array_code_are_audited_as_it_does(
     plain = audit_texts(database, monkeypatch, plain=True)
     assert plain == audit_texts(database, monkeypatch, plain=False)
     assert plain[0].count("tangent.xml,1,") == 2
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "_EPS",
+        "_SPLITTER",
+        "_PLAIN_NEWTON_STEPS",
+        "_WELL_CONDITIONED",
+        "_SAFE_SCALED",
+        "_HALF_WIDTH",
+        "_MAX",
+        "_SMALLEST_NORMAL",
+        "_ABSENT",
+    ],
+)
+def test_the_fast_paths_constants_are_the_solvers(name):
+    assert getattr(scalar, name) == getattr(solver, name)

@@ -41,9 +41,9 @@ from .columns import (
 )
 from .loader import STATUS_OK, DistortionEntry, SourceFile
 
-# numpy (and so the metrics) is imported where it is first needed, so that
-# run() can parse the database while numpy is still being imported, and
-# scan an unchanged one without it.
+# numpy (and so the metrics) is imported where it is first needed: an
+# unchanged database is scanned without it, and a changed one mostly too
+# (see lensaudit.scalar).
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -343,7 +343,7 @@ def _audit_files(
     formats: tuple[str, ...],
 ) -> Audit:
     """The audit of ``targets``: from the cache ``store`` where it knows the
-    content, parsed (in workers, while numpy imports) where not."""
+    content, parsed and audited (in workers, where a core is free) where not."""
     size = len(targets)
     files: list[SourceFile] = []
     parts: list[FileColumns] = []
@@ -450,7 +450,7 @@ def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tupl
     imported, once, before any worker is forked."""
     from lxml import etree  # noqa: F401
 
-    from . import cache  # noqa: F401
+    from . import cache, scalar  # noqa: F401
     from .formats import row_format
 
     for name in formats:

@@ -1,12 +1,13 @@
 """Parse database files in worker processes while the calling process does other work.
 
 Parsing the XML is most of a fresh ``lensaudit scan``. Where more than one
-CPU is available, :func:`parse_all` forks worker processes; they parse files
-while the calling process does its own work, then parses files too, and
-joins them once there are none left. Files are handed out one at a
-time, largest first, through a pipe, so that whichever process is free takes
-the next one. Results come back as :mod:`marshal` data: the packed columns
-of :mod:`lensaudit.cache`, not entry objects.
+CPU is available, :func:`parse_all` forks worker processes, which parse
+files while the calling process does its own work; then the calling process
+parses files too, and collects the workers' results once none are left.
+Files are handed out one at a time, largest first, through a pipe, so that
+whichever process is free takes the next one. Results come back as
+:mod:`marshal` data (the packed columns of :mod:`lensaudit.cache`, not entry
+objects), each marshalled as soon as it is made.
 
 Workers are used only where they are safe and pay: ``os.fork`` exists, the
 process runs a single thread (forking a threaded process can deadlock the
