@@ -16,6 +16,11 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+# typing only for type checkers, as elsewhere in lensaudit.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import IO
+
 #: Added to the environment of every git command.
 ENVIRONMENT = {
     "GIT_OPTIONAL_LOCKS": "0",
@@ -178,21 +183,29 @@ def objects(
     answers = process.stdout
     try:
         for _ in names:
-            header = answers.readline()
-            if not header:
-                raise GitError("git cat-file stopped before answering every request")
-            parts = header.split()
-            if len(parts) != 3:  # "<name> missing" or "<name> ambiguous"
-                yield None
-                continue
-            data = answers.read(int(parts[2]))
-            answers.read(1)  # the newline after the content
-            yield parts[0].decode("ascii", "replace"), parts[1].decode("ascii", "replace"), data
+            yield _answer(answers)
     finally:
         process.kill()
         feeder.join()
         answers.close()
         process.wait()
+
+
+def _answer(answers: IO[bytes]) -> tuple[str, str, bytes] | None:
+    """The next answer of a ``git cat-file --batch``: (object id, type, content), or
+    None for a name that names no object. Raises GitError when git has stopped."""
+    header = answers.readline()
+    if not header:
+        raise GitError("git cat-file stopped before answering every request")
+    parts = header.split()
+    if len(parts) != 3:  # "<name> missing" or "<name> ambiguous"
+        return None
+    size = int(parts[2])
+    data = answers.read(size)
+    answers.read(1)  # the newline after the content
+    if len(data) != size:
+        raise GitError("git cat-file stopped before answering every request")
+    return parts[0].decode("ascii", "replace"), parts[1].decode("ascii", "replace"), data
 
 
 def object_sizes(repository: str | os.PathLike[str], names: Sequence[str]) -> list[int | None]:
@@ -239,18 +252,7 @@ class ObjectReader:
             process.stdin.flush()
         except OSError:
             raise GitError("git cat-file stopped before answering every request") from None
-        header = process.stdout.readline()
-        if not header:
-            raise GitError("git cat-file stopped before answering every request")
-        parts = header.split()
-        if len(parts) != 3:  # "<name> missing" or "<name> ambiguous"
-            return None
-        size = int(parts[2])
-        data = process.stdout.read(size)
-        process.stdout.read(1)  # the newline after the content
-        if len(data) != size:
-            raise GitError("git cat-file stopped before answering every request")
-        return parts[0].decode("ascii", "replace"), parts[1].decode("ascii", "replace"), data
+        return _answer(process.stdout)
 
     def _started(self) -> subprocess.Popen[bytes]:
         owner = (os.getpid(), threading.get_ident())

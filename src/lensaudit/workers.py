@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from typing import Any, NoReturn, TypeVar
 
     T = TypeVar("T")
+    J = TypeVar("J")  # a piece of work: a Job, or any value ``parse`` takes
 
 #: Below this many bytes to parse, a worker costs more than it saves.
 MIN_BYTES = 256 * 1024
@@ -92,15 +93,12 @@ def in_parallel(tasks: list[Callable[[], T]]) -> list[T]:
     workers = min(_cpus() - 1, len(tasks) - 1, MAX_WORKERS)
     if workers < 1 or not _can_fork():
         return [task() for task in tasks]
-    jobs = [Job(Path(str(index)), str(index), size=MIN_BYTES) for index in range(len(tasks))]
-    return _in_processes(
-        jobs,
-        [MIN_BYTES] * len(jobs),
-        workers,
-        lambda job: tasks[int(job.name)](),
-        lambda: None,
-        None,
-    )
+    # The tasks are the jobs, each as large as the next.
+    return _in_processes(tasks, [1] * len(tasks), workers, _run, lambda: None, None)
+
+
+def _run(task: Callable[[], T]) -> T:
+    return task()
 
 
 def _can_fork() -> bool:
@@ -169,10 +167,10 @@ def _in_thread(
 
 
 def _in_processes(
-    jobs: list[Job],
+    jobs: list[J],
     sizes: list[int],
     workers: int,
-    parse: Callable[[Job], T],
+    parse: Callable[[J], T],
     meanwhile: Callable[[], Any],
     progress: Callable[[int, int], None] | None,
 ) -> list[T]:
@@ -230,7 +228,6 @@ def _taken(queue: int, tasks: list[list[int]]) -> Callable[[], int]:
     are taken in order, and the bytes left in the pipe tell how many remain."""
     import fcntl
     import termios
-    from itertools import accumulate
 
     before = [0, *accumulate(map(len, tasks))]  # jobs in the tasks before each
     left = bytearray(4)

@@ -80,17 +80,15 @@ def _next_state(
                 blob, carried.idents if carried else (), carried.introducers if carried else ()
             )
             continue
-        # Most entries of a changed file are those of its previous version: found
-        # there first (where _find_introducer looks first), the others searched.
-        introducers = list(map(previous.index().get, audit.idents)) if previous else []
-        if len(introducers) != len(audit.idents) or None in introducers:
-            introducers = [
-                found if found is not None else _find_introducer(ident, path, parents)
-                for ident, found in zip(
-                    audit.idents, introducers or [None] * len(audit.idents), strict=True
-                )
-            ]
-            introducers = [index if found is None else found for found in introducers]
+        # Most entries of a changed file are those of its previous version: looked
+        # up there directly (where _find_introducer looks first), the others searched.
+        known = previous.index() if previous is not None else {}
+        introducers = []
+        for ident in audit.idents:
+            found = known.get(ident)
+            if found is None:
+                found = _find_introducer(ident, path, parents)
+            introducers.append(index if found is None else found)
         state[path] = _FileState(blob, audit.idents, tuple(introducers))
     return state
 
