@@ -146,7 +146,8 @@ def test_a_warm_audit_gives_the_same_columns_as_a_cold_one(bundled_db):
     cold = run(bundled_db, cache=False)
     run(bundled_db, cache=True)  # fills the cache
     warm = run(bundled_db, cache=True)
-    assert warm._metric_columns is not None and "metrics" not in warm.__dict__  # from the cache
+    assert "metrics" not in warm.__dict__  # not computed: from the cache
+    assert all(part.packed_metrics is not None for part in warm._parts)
     assert snapshot(warm) == snapshot(cold)
     assert warm.summary.to_dict() == cold.summary.to_dict()
 
@@ -456,18 +457,49 @@ def test_any_flipped_bytes_in_the_cache_file_give_the_uncached_audit(small_db, d
     assert snapshot(run(small_db, cache=True)) == uncached
 
 
-def forge(path: Path, data: bytes, signature_format: bytes) -> None:
-    """Rewrite the cache file with every r_max set to 42, signed as the documented format
-    says (BLAKE2b-256 of the format, then the records) for ``signature_format``."""
-    header = len(store.MAGIC) + 32
-    records = marshal.loads(data[header:])
-    for key, (digest, entries, error, metrics, name, _) in records.items():
+def parts_of(data: bytes) -> tuple[list, list[bytes]]:
+    """The head and the parts of a cache file, read as the documented layout says:
+    the header, BLAKE2b-256, the head's length (8 bytes, little-endian), the
+    head (marshal data: the head and each part's seal and length), the parts."""
+    start = len(store.PARTS_MAGIC) + 32
+    length = int.from_bytes(data[start : start + 8], "little")
+    head, seals = marshal.loads(data[start + 8 : start + 8 + length])
+    parts, position = [], start + 8 + length
+    for _, size in seals:
+        parts.append(data[position : position + size])
+        position += size
+    assert position == len(data)
+    return head, parts
+
+
+def signed(head: list, parts: list[bytes], signature_format: bytes, seals=None) -> bytes:
+    """A cache file of ``head`` and ``parts``, laid out and signed as documented
+    (each part sealed with BLAKE2b-256 of its bytes, unless ``seals`` are given)."""
+    if seals is None:
+        seals = [hashlib.blake2b(part, digest_size=32).digest() for part in parts]
+    body = marshal.dumps(
+        (head, [(seal, len(part)) for seal, part in zip(seals, parts, strict=True)])
+    )
+    signature = hashlib.blake2b(signature_format + body, digest_size=32).digest()
+    return store.PARTS_MAGIC + signature + len(body).to_bytes(8, "little") + body + b"".join(parts)
+
+
+def forged_parts(parts: list[bytes]) -> list[bytes]:
+    """The records of ``parts`` with every r_max set to 42 and no rows rendered."""
+    forged = []
+    for part in parts:
+        digest, entries, error, metrics, name, _, tally = marshal.loads(part)
         count = len(array("d", metrics["r_max"]))
         metrics = dict(metrics, r_max=array("d", [42.0] * count).tobytes())
-        records[key] = (digest, entries, error, metrics, name, {})  # no rows rendered
-    body = marshal.dumps(records)
-    signature = hashlib.blake2b(signature_format + body, digest_size=32).digest()
-    path.write_bytes(store.MAGIC + signature + body)
+        forged.append(marshal.dumps((digest, entries, error, metrics, name, {}, tally)))
+    return forged
+
+
+def forge(path: Path, data: bytes, signature_format: bytes) -> None:
+    """Rewrite the cache file with every r_max set to 42, signed as the documented format
+    says for ``signature_format``."""
+    head, parts = parts_of(data)
+    path.write_bytes(signed(head, forged_parts(parts), signature_format))
 
 
 def test_a_cache_file_signed_for_this_version_is_served(small_db, cache_dir_path):
@@ -475,6 +507,28 @@ def test_a_cache_file_signed_for_this_version_is_served(small_db, cache_dir_path
     path, data = primed_cache(small_db, cache_dir_path)
     forge(path, data, cache_module.fingerprint())
     assert 42.0 in run(small_db, cache=True).column("r_max")
+
+
+def test_a_record_that_does_not_match_its_seal_is_not_served(small_db, cache_dir_path):
+    uncached = snapshot(run(small_db, cache=False))
+    path, data = primed_cache(small_db, cache_dir_path)
+    head, parts = parts_of(data)
+    old_seals = [hashlib.blake2b(part, digest_size=32).digest() for part in parts]
+    # The head signed as it should be, the records changed under their old seals.
+    path.write_bytes(signed(head, forged_parts(parts), cache_module.fingerprint(), old_seals))
+    assert snapshot(run(small_db, cache=True)) == uncached
+
+
+def test_one_damaged_record_costs_only_its_file(small_db, cache_dir_path, monkeypatch):
+    uncached = snapshot(run(small_db, cache=False))
+    path, data = primed_cache(small_db, cache_dir_path)
+    head, parts = parts_of(data)
+    seals = [hashlib.blake2b(part, digest_size=32).digest() for part in parts]
+    damaged = bytes([parts[0][0] ^ 1]) + parts[0][1:]
+    path.write_bytes(signed(head, [damaged, *parts[1:]], cache_module.fingerprint(), seals))
+    calls = count_parses(monkeypatch)
+    assert snapshot(run(small_db, cache=True)) == uncached
+    assert len(calls) == 1 and len(parts) == 3
 
 
 def test_a_cache_file_from_another_version_is_ignored(small_db, cache_dir_path):

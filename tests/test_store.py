@@ -86,6 +86,93 @@ def test_any_truncation_reads_as_none(tmp_path_factory, data):
     assert file.read() is None
 
 
+HEAD = [("a", 1), ("b", 2)]
+PARTS_VALUES = [{"x": [1.5, "text"]}, (b"\x00" * 1000, None, True)]
+
+
+def written_parts(directory: Path) -> tuple[store.RecordFile, bytes]:
+    """A store file holding HEAD and PARTS_VALUES as sealed parts, and its bytes."""
+    file = record_file(directory)
+    file.write_parts(HEAD, [store.sealed(value) for value in PARTS_VALUES])
+    return file, file.path.read_bytes()
+
+
+def values_read(file: store.RecordFile):
+    """The head and the values of the parts read back, None for a part that fails its seal."""
+    found = file.read_parts()
+    if found is None:
+        return None
+    head, parts = found
+    return head, [store.unseal(seal, body) for seal, body in parts]
+
+
+def test_parts_written_are_read_back_equal(tmp_path):
+    file, _ = written_parts(tmp_path)
+    assert values_read(record_file(tmp_path)) == (HEAD, PARTS_VALUES)
+
+
+def test_a_file_of_parts_is_the_documented_layout(tmp_path):
+    _, data = written_parts(tmp_path)
+    parts = [marshal.dumps(value) for value in PARTS_VALUES]
+    seals = [hashlib.blake2b(part, digest_size=32).digest() for part in parts]
+    head = marshal.dumps(
+        (HEAD, [(seal, len(part)) for seal, part in zip(seals, parts, strict=True)])
+    )
+    checksum = hashlib.blake2b(FINGERPRINT + head, digest_size=32).digest()
+    layout = store.PARTS_MAGIC + checksum + len(head).to_bytes(8, "little") + head
+    assert data == layout + b"".join(parts)
+
+
+def test_a_file_of_parts_is_not_read_as_one_value_nor_the_reverse(tmp_path):
+    written_parts(tmp_path)
+    assert record_file(tmp_path).read() is None
+    record_file(tmp_path).write(VALUE)
+    assert record_file(tmp_path).read_parts() is None
+
+
+def test_parts_of_another_fingerprint_read_as_none(tmp_path):
+    written_parts(tmp_path)
+    other = store.RecordFile(
+        tmp_path, "parsed", "x", b"test format 2", max_files=16, max_bytes=1 << 20
+    )
+    assert other.read_parts() is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(flips=FLIPS)
+def test_flipped_bytes_in_a_file_of_parts_never_give_another_value(tmp_path_factory, flips):
+    file, original = written_parts(tmp_path_factory.mktemp("store"))
+    damaged = flipped(original, flips)
+    if damaged == original:
+        return
+    file.path.write_bytes(damaged)
+    found = values_read(file)
+    # The head damaged: nothing; a part damaged: that part fails its seal.
+    assert found is None or (
+        found[0] == HEAD
+        and all(
+            value in (None, expected)
+            for value, expected in zip(found[1], PARTS_VALUES, strict=True)
+        )
+        and None in found[1]
+    )
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.data())
+def test_any_truncation_of_a_file_of_parts_reads_as_none(tmp_path_factory, data):
+    file, original = written_parts(tmp_path_factory.mktemp("store"))
+    file.path.write_bytes(original[: data.draw(st.integers(0, len(original) - 1))])
+    assert file.read_parts() is None
+
+
+def test_parts_larger_than_the_bound_are_not_written(tmp_path):
+    small = record_file(tmp_path, max_bytes=500)
+    with pytest.raises(ValueError):
+        small.write_parts(HEAD, [store.sealed(value) for value in PARTS_VALUES])
+    assert not small.path.exists()
+
+
 def test_a_file_larger_than_the_bound_is_neither_written_nor_read(tmp_path):
     small = record_file(tmp_path, max_bytes=100)
     with pytest.raises(ValueError):

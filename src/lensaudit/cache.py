@@ -30,13 +30,18 @@ bytes in total are removed (the one just written is kept), and so are
 temporary files left behind for more than an hour. Within a cache file,
 records of files not seen in the run that writes it are dropped.
 
-Integrity: a cache file is a fixed header, a BLAKE2b checksum, then the
-records as :mod:`marshal` data. The checksum covers the records and the
-format described above, and is verified before anything is unmarshalled: a
-flipped byte, a truncated file or a file written by another version is
-ignored. The cache is an optimization only: any problem reading or writing
-it (unreadable or read-only directory, full disk, garbage) means parsing as
-if it were not there, without a message.
+Integrity: a cache file is a file of sealed parts (see :mod:`lensaudit.store`):
+a fixed header, a BLAKE2b checksum, a head naming each file's path and
+content digest with the seal of its record, then the records, each as
+:mod:`marshal` data of its own. The checksum covers the head and the format
+described above, and is verified before anything is unmarshalled; a record
+is unmarshalled only once its bytes match its seal (BLAKE2b-256). A flipped
+byte, a truncated file or a file written by another version is ignored, as
+is a damaged record. Records are sealed by the process that makes them (a
+worker, as it parses), so that saving the cache is mostly writing bytes.
+The cache is an optimization only: any problem reading or writing it
+(unreadable or read-only directory, full disk, garbage) means parsing as if
+it were not there, without a message.
 
 Records hold each column of a file's entries as one object (a block of
 doubles, or texts joined into one string): reading the cache creates no
@@ -103,7 +108,7 @@ def fingerprint() -> bytes:
     record layout and the auditing code. Computed when a cache is first used,
     not at import: a scan without the cache reads no source file for it."""
     return (
-        f"lensaudit parse cache 5 {__version__} {_code_digest()} "
+        f"lensaudit parse cache 6 {__version__} {_code_digest()} "
         f"{' '.join(f'{name}:{kind}' for name, kind in _KINDS.items())} "
         f"{' '.join(METRIC_FLOAT_COLUMNS)} {' '.join(METRIC_FLAG_COLUMNS)} rows"
     ).encode()
@@ -237,16 +242,26 @@ def pack_metrics(columns: dict[str, list]) -> dict[str, bytes]:
 
 def unpack_metrics(packed: dict[str, bytes], count: int) -> dict[str, list]:
     """Metric columns packed by :func:`pack_metrics`, checked to hold ``count`` values each."""
+    check_metrics(packed, count)
     columns = {name: array("d", packed[name]).tolist() for name in METRIC_FLOAT_COLUMNS}
     columns.update({name: array("b", packed[name]).tolist() for name in METRIC_FLAG_COLUMNS})
-    if any(len(values) != count for values in columns.values()):
-        raise ValueError("inconsistent cache record")
     return columns
 
 
+def check_metrics(packed: dict[str, bytes], count: int) -> None:
+    """Raise ValueError (or another of :data:`RECORD_ERRORS`) unless ``packed``
+    holds every metric column packed by :func:`pack_metrics`, ``count`` values each."""
+    for names, size in ((METRIC_FLOAT_COLUMNS, 8), (METRIC_FLAG_COLUMNS, 1)):
+        for name in names:
+            stored = packed[name]
+            if not isinstance(stored, bytes) or len(stored) != size * count:
+                raise ValueError("inconsistent cache record")
+
+
 #: A record: content digest, packed entries, file error, packed metrics or None,
-#: the file name rendered rows show, rendered rows by format name.
-_Record = tuple[bytes, dict, str, "dict | None", str, "dict[str, str]"]
+#: the file name rendered rows show, rendered rows by format name, and the
+#: file's tally for the summary (:func:`lensaudit.summary.tally`) or None.
+_Record = tuple[bytes, dict, str, "dict | None", str, "dict[str, str]", "tuple | None"]
 #: What unpacking a damaged or foreign record can raise.
 RECORD_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
 
@@ -256,15 +271,18 @@ class CachedFile:
     """What the cache holds for one file's content.
 
     ``packed`` are its entries (see :func:`pack_columns`), ``count`` of them;
-    ``metrics`` their metric columns, or None if not audited yet; ``rows``
-    the rendered rows by format name, for the file name asked for.
+    ``metrics`` their metric columns as :func:`pack_metrics` packs them
+    (checked to hold ``count`` values each), or None if not audited yet; ``rows``
+    the rendered rows by format name, for the file name asked for; ``tally``
+    the file's counts for the summary, or None.
     """
 
     packed: dict
     count: int
     error: str
-    metrics: dict[str, list] | None
+    metrics: dict[str, bytes] | None
     rows: dict[str, str]
+    tally: tuple | None
 
 
 def cache_dir() -> Path:
@@ -285,7 +303,7 @@ def cache_dir() -> Path:
 def _valid_record(record: object) -> bool:
     return (
         isinstance(record, tuple)
-        and len(record) == 6
+        and len(record) == 7
         and isinstance(record[0], bytes)
         and len(record[0]) == _DIGEST_SIZE
         and isinstance(record[1], dict)
@@ -294,19 +312,68 @@ def _valid_record(record: object) -> bool:
         and isinstance(record[4], str)
         and isinstance(record[5], dict)
         and all(isinstance(k, str) and isinstance(v, str) for k, v in record[5].items())
+        and (record[6] is None or isinstance(record[6], tuple))
     )
 
 
-def _read_records(file: store.RecordFile) -> dict[bytes, _Record]:
-    """The records of a cache file; empty if it is missing, damaged or foreign."""
-    records = file.read()
-    if not isinstance(records, dict):
+def sealed_record(
+    digest: bytes,
+    packed: dict,
+    error: str,
+    metrics: dict[str, list] | None,
+    name: str,
+    rows: dict[str, str],
+    tally: tuple | None,
+) -> tuple[bytes, bytes, _Record]:
+    """What the cache stores of one file, as the sealed part of a cache file:
+    ``(seal, body, record)`` (see :func:`lensaudit.store.sealed`), for
+    :meth:`ParseCache.store_sealed`. Made where the file is parsed: a worker
+    process seals its records while the others parse. Raises ValueError (or
+    another of :data:`RECORD_ERRORS`) for what cannot be stored."""
+    packed_metrics = None if metrics is None else pack_metrics(metrics)
+    record = (digest, packed, error, packed_metrics, name, rows, tally)
+    return (*store.sealed(record), record)
+
+
+class _Held:
+    """A record the cache holds: its file's content digest, the seal and bytes
+    of its part (None until sealed), and the record itself (None until
+    read from those bytes)."""
+
+    __slots__ = ("digest", "seal", "body", "record")
+
+    def __init__(
+        self,
+        digest: bytes,
+        seal: bytes | None,
+        body: bytes | memoryview | None,
+        record: _Record | None,
+    ) -> None:
+        self.digest = digest
+        self.seal = seal
+        self.body = body
+        self.record = record
+
+
+def _read_records(file: store.RecordFile) -> dict[bytes, _Held]:
+    """The records of a cache file, not yet unsealed; empty if it is missing,
+    damaged or foreign."""
+    found = file.read_parts()
+    if found is None:
         return {}
-    return {
-        key: record
-        for key, record in records.items()
-        if isinstance(key, bytes) and _valid_record(record)
-    }
+    head, parts = found
+    if not isinstance(head, list) or len(head) != len(parts):
+        return {}
+    held = {}
+    for item, (part_seal, body) in zip(head, parts, strict=True):
+        if (
+            isinstance(item, tuple)
+            and len(item) == 2
+            and isinstance(item[0], bytes)
+            and isinstance(item[1], bytes)
+        ):
+            held[item[0]] = _Held(item[1], part_seal, body, None)
+    return held
 
 
 def record_file(
@@ -343,7 +410,7 @@ class ParseCache:
         """The cache of the set of files ``paths``, resolved (as
         :func:`lensaudit.loader.expand` gives them), in :func:`cache_dir` by default."""
         # path (os.fsencode of the absolute path) -> record
-        self._records: dict[bytes, _Record] = {}
+        self._records: dict[bytes, _Held] = {}
         self._seen: set[bytes] = set()
         self._changed = False
         self._file: store.RecordFile | None = None
@@ -362,6 +429,21 @@ class ParseCache:
         """Whether a record of ``path`` is held (so that hashing the file may pay)."""
         return os.fsencode(path) in self._records
 
+    def _record(self, key: bytes, digest: bytes) -> _Record | None:
+        """The record held for ``key`` if it is of content ``digest`` and intact."""
+        held = self._records.get(key)
+        if held is None or held.digest != digest:
+            return None
+        if held.record is None:
+            assert held.seal is not None and held.body is not None
+            record = store.unseal(held.seal, held.body)
+            if not _valid_record(record) or record[0] != digest:  # type: ignore[index]
+                del self._records[key]
+                self._changed = True
+                return None
+            held.record = record  # type: ignore[assignment]
+        return held.record
+
     def find(self, path: Path, digest: bytes, name: str) -> CachedFile | None:
         """What is stored for ``path`` if its content has ``digest``, else None.
 
@@ -369,16 +451,24 @@ class ParseCache:
         """
         key = os.fsencode(path)
         self._seen.add(key)
-        record = self._records.get(key)
-        if record is None or record[0] != digest:
+        record = self._record(key, digest)
+        if record is None:
             return None
         try:
             count = packed_count(record[1])
-            metrics = None if record[3] is None else unpack_metrics(record[3], count)
+            metrics = record[3]
+            if metrics is not None:
+                check_metrics(metrics, count)
         except RECORD_ERRORS:
             return None
+        same_name = record[4] == name
         return CachedFile(
-            record[1], count, record[2], metrics, record[5] if record[4] == name else {}
+            record[1],
+            count,
+            record[2],
+            metrics,
+            record[5] if same_name else {},
+            record[6] if metrics is not None else None,
         )
 
     def store(
@@ -390,11 +480,14 @@ class ParseCache:
         metrics: dict[str, list] | None = None,
         name: str = "",
         rows: dict[str, str] | None = None,
+        tally: tuple | None = None,
     ) -> None:
-        """Keep what was made of ``path``'s content with ``digest``.
+        """Keep what was made of ``path``'s content with ``digest`` (sealed when
+        the cache is saved).
 
         ``rows`` (rendered rows by format, for file name ``name``) are added to
-        those stored for the same content and name.
+        those stored for the same content and name; metrics and tally kept
+        from them where none are given.
         """
         if self._file is None:
             return
@@ -403,18 +496,28 @@ class ParseCache:
         try:
             packed_metrics = None if metrics is None else pack_metrics(metrics)
         except RECORD_ERRORS:
-            packed_metrics = None
-        old = self._records.get(key)
+            packed_metrics = tally = None
+        old = self._record(key, digest)
         kept_rows: dict[str, str] = {}
-        if old is not None and old[0] == digest and old[4] == name:
+        if old is not None and old[4] == name:
             kept_rows = dict(old[5])
             if packed_metrics is None:
-                packed_metrics = old[3]
+                packed_metrics, tally = old[3], old[6]
         kept_rows.update(rows or {})
-        record = (digest, packed, error, packed_metrics, name, kept_rows)
+        record = (digest, packed, error, packed_metrics, name, kept_rows, tally)
         if old != record:
-            self._records[key] = record
+            self._records[key] = _Held(digest, None, None, record)
             self._changed = True
+
+    def store_sealed(self, path: Path, part_seal: bytes, body: bytes, record: _Record) -> None:
+        """Keep a record sealed where it was made (see :func:`sealed_record`):
+        ``body`` is its bytes, ``record`` what they hold."""
+        if self._file is None:
+            return
+        key = os.fsencode(path)
+        self._seen.add(key)
+        self._records[key] = _Held(record[0], part_seal, body, record)
+        self._changed = True
 
     def forget(self, path: Path) -> None:
         """Drop the record of ``path`` (a file that could not be read)."""
@@ -445,12 +548,22 @@ class ParseCache:
         """Write the cache if anything changed, then evict; silently skipped when not possible.
 
         Files not seen in this run (removed from the database) are dropped.
+        Records already sealed (read from the cache file, or sealed by a
+        worker) are written as they are.
         """
         stale = self._records.keys() - self._seen
         if self._file is None or not (self._changed or stale):
             return
-        kept = {k: v for k, v in self._records.items() if k in self._seen}
+        head = []
+        parts = []
         try:
-            self._file.write(kept)
+            for key, held in self._records.items():
+                if key not in self._seen:
+                    continue
+                if held.seal is None or held.body is None:
+                    held.seal, held.body = store.sealed(held.record)
+                head.append((key, held.digest))
+                parts.append((held.seal, held.body))
+            self._file.write_parts(head, parts)
         except (OSError, ValueError):
             pass

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
 
     from . import metrics
     from .cache import ParseCache
-    from .summary import Summary
+    from .summary import Summary, Tally
     from .workers import Job
 
 # The column names and float formatting live in lensaudit.columns; other
@@ -75,6 +75,8 @@ __all__ = [
 
 #: The entry columns a row format renders (around the metrics).
 _ROW_ENTRY_COLUMNS = LEADING_COLUMNS + TRAILING_COLUMNS
+#: The entry columns a file's tally counts by (see :func:`lensaudit.summary.tally`).
+_TALLIED = ("model", "status", "type")
 
 
 @dataclass(slots=True)
@@ -82,13 +84,27 @@ class FileColumns:
     """One file of an audit: its entries as packed columns (see
     :func:`lensaudit.cache.pack_columns`), ``count`` of them, and what row
     formats rendered of them, by format name: whole ``rows``, or each row's
-    text before and after its metrics (``row_texts``, rendered while parsing).
+    text before and after its metrics (``row_texts``, rendered while parsing);
+    its metric columns (or the same packed, ``packed_metrics``, as the cache
+    holds them: see :meth:`metric_lists`) and its tally for the summary
+    (:func:`lensaudit.summary.tally`), where known.
     """
 
     packed: dict
     count: int
     rows: dict[str, str] = field(default_factory=dict)
     row_texts: dict[str, tuple[list[str], list[str]]] = field(default_factory=dict)
+    metrics: dict[str, list] | None = None
+    tally: Tally | None = None
+    packed_metrics: dict[str, bytes] | None = None
+
+    def metric_lists(self) -> dict[str, list] | None:
+        """The file's metric columns, unpacked when first asked for; None if not known."""
+        if self.metrics is None and self.packed_metrics is not None:
+            from .cache import unpack_metrics
+
+            self.metrics = unpack_metrics(self.packed_metrics, self.count)
+        return self.metrics
 
 
 class Audit:
@@ -96,8 +112,9 @@ class Audit:
 
     Entries come as :class:`~lensaudit.loader.DistortionEntry` objects, or
     file by file as packed columns (``parts``, one :class:`FileColumns` per
-    file); metrics as :class:`lensaudit.metrics.Metrics` (numpy arrays), or
-    as plain lists per metric column. Each form gives the others on demand.
+    file); metrics as :class:`lensaudit.metrics.Metrics` (numpy arrays), as
+    plain lists per metric column, or with each part. Each form gives the
+    others on demand.
     """
 
     def __init__(
@@ -110,7 +127,14 @@ class Audit:
         *,
         parts: list[FileColumns] | None = None,
     ) -> None:
-        if metrics is None and metric_columns is None:
+        if (
+            metrics is None
+            and metric_columns is None
+            and (
+                parts is None
+                or any(part.metrics is None and part.packed_metrics is None for part in parts)
+            )
+        ):
             raise ValueError("an Audit needs its metrics")
         if entries is None and parts is None:
             raise ValueError("an Audit needs its entries")
@@ -171,8 +195,9 @@ class Audit:
 
         from .metrics import Metrics
 
-        columns = self._metric_columns
-        assert columns is not None
+        # Given as lists, or with each part (an audit made with neither has them as arrays).
+        assert self._metric_columns is not None or self._parts is not None
+        columns = self.metric_columns()
         return Metrics(
             **{name: np.array(columns[name], dtype=np.float64) for name in METRIC_FLOAT_COLUMNS},
             tail=np.array(columns["tail"], dtype=np.int8),
@@ -182,8 +207,38 @@ class Audit:
     def metric_columns(self) -> dict[str, list]:
         """The metrics as lists: floats, ``tail`` as -1/0/1, ``folds_in_image`` as 0/1."""
         if self._metric_columns is None:
-            self._metric_columns = _metric_lists(self.metrics)
+            if "metrics" in self.__dict__ or self._parts is None:
+                self._metric_columns = _metric_lists(self.metrics)
+            else:
+                columns: dict[str, list] = {name: [] for name in METRIC_COLUMNS}
+                for part in self._parts:
+                    lists = part.metric_lists()
+                    assert lists is not None
+                    for name, values in columns.items():
+                        values += lists[name]
+                self._metric_columns = columns
         return self._metric_columns
+
+    def tallies(self) -> list[tuple[Tally, int]]:
+        """Each file's tally for the summary (see :func:`lensaudit.summary.tally`),
+        made now where not known, and its number of entries; for an audit of
+        entries given in memory, one tally of them all."""
+        from .summary import tally
+
+        if self._parts is None:
+            columns = [self._entry_column(name) for name in _TALLIED]
+            return [(tally(*columns, self.metric_columns()), len(self))]
+        found = []
+        for index, (file, part) in enumerate(zip(self.files, self._parts, strict=True)):
+            if part.tally is None:
+                metrics = part.metric_lists()
+                if metrics is None:
+                    start, end = self._starts[index], self._starts[index + 1]
+                    metrics = {k: v[start:end] for k, v in self.metric_columns().items()}
+                columns = _unpacked(part, file.name, _TALLIED)
+                part.tally = tally(*columns.values(), metrics)
+            found.append((part.tally, part.count))
+        return found
 
     @cached_property
     def audited(self) -> np.ndarray:
@@ -347,7 +402,6 @@ def _audit_files(
     size = len(targets)
     files: list[SourceFile] = []
     parts: list[FileColumns] = []
-    metrics: list[dict[str, list] | None] = [None] * size
     digests: list[bytes | None] = [None] * size
     cached_rows: list[frozenset[str]] = [frozenset()] * size
     jobs: list[tuple[int, tuple[Path, str, bytes | None]]] = []  # (index, job's fields)
@@ -365,8 +419,15 @@ def _audit_files(
                 found = store.find(path, digest, name)
                 if found is not None:
                     files.append(SourceFile(name, path, found.count, found.error))
-                    parts.append(FileColumns(found.packed, found.count, dict(found.rows)))
-                    metrics[index] = found.metrics
+                    parts.append(
+                        FileColumns(
+                            found.packed,
+                            found.count,
+                            dict(found.rows),
+                            packed_metrics=found.metrics,
+                            tally=found.tally,
+                        )
+                    )
                     digests[index] = digest
                     cached_rows[index] = frozenset(found.rows)
                     continue
@@ -374,6 +435,7 @@ def _audit_files(
         parts.append(FileColumns({}, 0))
         jobs.append((index, (path, name, data)))
 
+    stored = set()  # files whose records are stored as their parse sealed them
     if jobs:
         parse = file_parser(formats, digests=store is not None)
         # numpy is not imported meanwhile: lensaudit.scalar computes the metrics
@@ -383,20 +445,29 @@ def _audit_files(
         from .workers import Job, parse_all
 
         work = [Job(*fields) for _, fields in jobs]
-        results = parse_all(work, parse, meanwhile)
-        for (index, _), job, (digest, packed, count, error, file_metrics, texts) in zip(
-            jobs, work, results, strict=True
+        for (index, _), job, result in zip(
+            jobs, work, parse_all(work, parse, meanwhile), strict=True
         ):
+            if result[0] == _SEALED:
+                assert store is not None
+                files[index], parts[index], digests[index] = _unsealed(job, result, store)
+                stored.add(index)
+                continue
+            _, digest, packed, count, error, file_metrics, texts, file_tally = result
             files[index] = SourceFile(job.name, job.path, count, error)
             if file_metrics is None:
                 parts[index] = FileColumns(packed, count, row_texts=texts)
             else:
-                parts[index] = FileColumns(packed, count, rows=texts)
-                metrics[index] = file_metrics
+                parts[index] = FileColumns(packed, count, rows=texts, metrics=file_metrics)
+                parts[index].tally = file_tally
             digests[index] = digest
 
     computed = None
-    missing = [index for index in range(size) if metrics[index] is None]
+    missing = [
+        index
+        for index in range(size)
+        if parts[index].metrics is None and parts[index].packed_metrics is None
+    ]
     audited_now = {index for index, _ in jobs}.union(missing)
     if missing:
         computed = _compute([parts[index] for index in missing])
@@ -404,33 +475,56 @@ def _audit_files(
         lists = _metric_lists(computed)
         for index in missing:
             end = start + parts[index].count
-            metrics[index] = {name: values[start:end] for name, values in lists.items()}
+            parts[index].metrics = {name: values[start:end] for name, values in lists.items()}
             start = end
-    columns: dict[str, list] = {name: [] for name in METRIC_COLUMNS}
-    for file_metrics in metrics:
-        assert file_metrics is not None
-        for name, values in columns.items():
-            values += file_metrics[name]
     audit = Audit(
         source,
         files,
         metrics=computed if missing and len(missing) == size else None,
-        metric_columns=columns,
         parts=parts,
     )
     for name in formats:
         for _ in audit.rows(name):  # rendered now, to be cached
             pass
     if store is not None:
+        if missing:
+            audit.tallies()  # to be cached with the metrics
         for index, (file, part) in enumerate(zip(files, parts, strict=True)):
             digest = digests[index]
             new_rows = {k: v for k, v in part.rows.items() if k not in cached_rows[index]}
-            if digest is not None and (index in audited_now or new_rows):
-                store.store(
-                    file.path, digest, part.packed, file.error, metrics[index], file.name, new_rows
-                )
+            if index in stored or digest is None or not (index in audited_now or new_rows):
+                continue
+            store.store(
+                file.path,
+                digest,
+                part.packed,
+                file.error,
+                part.metric_lists(),
+                file.name,
+                new_rows,
+                part.tally,
+            )
         store.save()
     return audit
+
+
+#: What :func:`_parse` gives: a record sealed for the cache, or the plain result.
+_SEALED, _PLAIN = "sealed", "plain"
+
+
+def _unsealed(job: Job, result: tuple, store: ParseCache) -> tuple[SourceFile, FileColumns, bytes]:
+    """The file, its columns and its digest from a record :func:`_parse` sealed,
+    which ``store`` keeps as it is."""
+    import marshal
+
+    _, part_seal, body, record = result
+    if record is None:  # sent by a worker
+        record = marshal.loads(body)
+    digest, packed, error, packed_metrics, _, rows, file_tally = record
+    count = packed["count"]
+    store.store_sealed(job.path, part_seal, body, record)
+    part = FileColumns(packed, count, dict(rows), tally=file_tally, packed_metrics=packed_metrics)
+    return SourceFile(job.name, job.path, count, error), part, digest
 
 
 def _nothing() -> None:
@@ -450,22 +544,31 @@ def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tupl
     imported, once, before any worker is forked."""
     from lxml import etree  # noqa: F401
 
-    from . import cache, scalar  # noqa: F401
+    from . import cache, scalar, summary  # noqa: F401
     from .formats import row_format
 
     for name in formats:
         row_format(name)
-    return partial(_parse, formats=formats, digests=digests)
+    return partial(_parse, formats=formats, digests=digests, caller=os.getpid())
 
 
-def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
-    """What the audit needs of one file: the digest of the bytes parsed (None if
-    unreadable, or not wanted), packed entries, their count, the file error,
-    the metrics by :mod:`lensaudit.scalar` (None if it leaves any entry to the
-    array code), and each row format's rows (with metrics) or, without them,
-    its texts of every row before and after its metrics."""
-    from .cache import content_digest, pack_columns
+def _parse(job: Job, formats: tuple[str, ...], digests: bool = True, caller: int = 0) -> tuple:
+    """What the audit needs of one file.
+
+    With ``digests`` (for the cache), and where :mod:`lensaudit.scalar` gives
+    every metric: ``(_SEALED, seal, body, record)``, the file's cache record
+    sealed (see :func:`lensaudit.cache.sealed_record`), and the record itself
+    if this is the process ``caller`` (a worker sends None instead: the
+    caller reads the record from its bytes). Otherwise ``(_PLAIN, digest,
+    packed, count, error, metrics, texts, tally)``: the digest of the bytes
+    parsed (None if unreadable, or not wanted), packed entries, their count,
+    the file error, the metrics (None if :mod:`lensaudit.scalar` leaves any
+    entry to the array code), each row format's rows (with metrics) or,
+    without them, its texts of every row before and after its metrics, and
+    the file's tally for the summary (None without metrics)."""
+    from .cache import RECORD_ERRORS, content_digest, pack_columns, sealed_record
     from .scalar import column_metrics
+    from .summary import tally
 
     digest = None
     try:
@@ -480,6 +583,9 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
     columns = loader.row_columns(rows)
     packed = pack_columns(columns, len(rows))
     metrics = column_metrics(columns, STATUS_OK)
+    file_tally = None
+    if metrics is not None:
+        file_tally = tally(*(columns[name] for name in _TALLIED), metrics)
     texts = {}
     if formats:
         from .formats import row_format
@@ -491,7 +597,16 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
                 texts[name] = module.row_texts(columns)
             else:
                 texts[name] = module.file_rows(columns, metrics)
-    return digest, packed, len(rows), error, metrics, texts
+    if digest is not None and metrics is not None:
+        try:
+            seal, body, record = sealed_record(
+                digest, packed, error, metrics, job.name, texts, file_tally
+            )
+        except RECORD_ERRORS:  # stored later, or not at all, as the cache decides
+            pass
+        else:
+            return _SEALED, seal, body, record if os.getpid() == caller else None
+    return _PLAIN, digest, packed, len(rows), error, metrics, texts, file_tally
 
 
 def _compute(parts: list[FileColumns]) -> metrics.Metrics:

@@ -8,6 +8,12 @@ value (lensaudit's version, the layout of the records, a digest of the
 code). The checksum is verified before anything is unmarshalled: a flipped
 byte, a truncated file or a file of another fingerprint reads as no file.
 
+A file may also hold its value as sealed parts (:meth:`RecordFile.write_parts`):
+a head, checksummed as above with the seal of each part, then the parts,
+each marshal data of its own, checked against its seal (:func:`unseal`)
+only when it is used. Parts are sealed where they are made (a worker
+process, for one), so that writing the file is mostly copying bytes.
+
 A file is written whole to a temporary file beside it, then renamed over
 it: a reader finds the old value or the new one, never a mixture. After each
 write, the least recently used store files of the directory (of every kind)
@@ -39,7 +45,10 @@ except ImportError:
 KINDS = ("parsed", "history", "check")
 
 MAGIC = b"lensaudit cache\n"
+#: The header of a file of sealed parts (as long as MAGIC).
+PARTS_MAGIC = b"lensaudit parts\n"
 CHECKSUM_SIZE = 32
+_LENGTH_SIZE = 8  # the head's length, in a file of sealed parts
 SUFFIX = ".cache"
 _TEMPORARY_SUFFIX = ".tmp"
 _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
@@ -59,6 +68,29 @@ def checksum(fingerprint: bytes, body: bytes | memoryview) -> bytes:
     digest = blake2b(fingerprint, digest_size=CHECKSUM_SIZE)
     digest.update(body)
     return digest.digest()
+
+
+def seal(body: bytes | memoryview) -> bytes:
+    """The seal of a part: BLAKE2b-256 of its bytes."""
+    return blake2b(body, digest_size=CHECKSUM_SIZE).digest()
+
+
+def sealed(value: object) -> tuple[bytes, bytes]:
+    """``value`` as a part (its :mod:`marshal` data) and that part's seal:
+    ``(seal, body)``. Raises ValueError for a value marshal cannot store."""
+    body = marshal.dumps(value)
+    return seal(body), body
+
+
+def unseal(part_seal: bytes, body: bytes | memoryview) -> object:
+    """The value of a part, or None if its bytes do not match ``part_seal``
+    or are not marshal data."""
+    if seal(body) != part_seal:
+        return None
+    try:
+        return marshal.loads(body)
+    except (EOFError, ValueError, TypeError):
+        return None
 
 
 def code_digest(package: Path, patterns: tuple[str, ...]) -> str:
@@ -112,13 +144,11 @@ class RecordFile:
             self._fingerprint = self._fingerprint()
         return self._fingerprint
 
-    def read(self) -> object:
-        """The value stored, or None if the file is missing, damaged, of another
-        fingerprint, too large, or not a regular file."""
-        path = self.path
+    def _data(self) -> bytes | None:
+        """The file's bytes, or None if it is missing, too large or not a regular file."""
         try:
             # Non-blocking, and regular files only: a FIFO put here must not hang a run.
-            handle = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+            handle = os.open(self.path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         except OSError:
             return None
         try:
@@ -127,12 +157,25 @@ class RecordFile:
                 return None
             with os.fdopen(handle, "rb") as stream:
                 handle = -1
-                data = stream.read()
+                return stream.read()
         except OSError:
             return None
         finally:
             if handle != -1:
                 os.close(handle)
+
+    def _used(self) -> None:
+        try:  # recently used: last to be evicted
+            os.utime(self.path)
+        except OSError:
+            pass
+
+    def read(self) -> object:
+        """The value stored, or None if the file is missing, damaged, of another
+        fingerprint, too large, or not a regular file."""
+        data = self._data()
+        if data is None:
+            return None
         start = len(MAGIC) + CHECKSUM_SIZE
         body = memoryview(data)[start:]
         if not data.startswith(MAGIC) or data[len(MAGIC) : start] != checksum(
@@ -143,11 +186,42 @@ class RecordFile:
             value = marshal.loads(body)
         except (EOFError, ValueError, TypeError):
             return None
-        try:  # recently used: last to be evicted
-            os.utime(path)
-        except OSError:
-            pass
+        self._used()
         return value
+
+    def read_parts(self) -> tuple[object, list[tuple[bytes, memoryview]]] | None:
+        """The head and the parts written by :meth:`write_parts`: each part as its
+        seal and its bytes, not yet checked (see :func:`unseal`). None if the
+        file is missing, of another fingerprint or layout, or its head or
+        length is damaged."""
+        data = self._data()
+        if data is None or not data.startswith(PARTS_MAGIC):
+            return None
+        start = len(PARTS_MAGIC) + CHECKSUM_SIZE
+        view = memoryview(data)
+        head_end = (
+            start + _LENGTH_SIZE + int.from_bytes(view[start : start + _LENGTH_SIZE], "little")
+        )
+        body = view[start + _LENGTH_SIZE : head_end]
+        if head_end > len(data) or view[len(PARTS_MAGIC) : start] != checksum(
+            self.fingerprint, body
+        ):
+            return None
+        try:
+            head, seals = marshal.loads(body)
+            ends = []
+            position = head_end
+            for part_seal, length in seals:
+                if not isinstance(part_seal, bytes) or not isinstance(length, int) or length < 0:
+                    return None
+                ends.append((part_seal, position, position + length))
+                position += length
+        except (EOFError, ValueError, TypeError):
+            return None
+        if position != len(data):
+            return None
+        self._used()
+        return head, [(part_seal, view[first:end]) for part_seal, first, end in ends]
 
     def write(self, value: object) -> None:
         """Store ``value`` (see :meth:`write_body`)."""
@@ -159,7 +233,22 @@ class RecordFile:
         Raises OSError when the file cannot be written, ValueError when it
         would be larger than ``max_bytes`` (it would be evicted, never read).
         """
-        if len(MAGIC) + CHECKSUM_SIZE + len(body) > self.max_bytes:
+        self._write([MAGIC + checksum(self.fingerprint, body), body])
+
+    def write_parts(self, head: object, parts: list[tuple[bytes, bytes | memoryview]]) -> None:
+        """Store ``head`` and sealed ``parts`` (``(seal, body)`` pairs, as
+        :func:`sealed` makes them), then evict; raises as :meth:`write_body`.
+
+        The parts are written as they are: their seals, not their bytes, are
+        what the file's checksum covers.
+        """
+        body = marshal.dumps((head, [(part_seal, len(part)) for part_seal, part in parts]))
+        start = PARTS_MAGIC + checksum(self.fingerprint, body) + len(body).to_bytes(8, "little")
+        self._write([start, body, *(part for _, part in parts)])
+
+    def _write(self, pieces: list[bytes | memoryview]) -> None:
+        """Write the file as ``pieces`` in a row (through a temporary file), then evict."""
+        if sum(map(len, pieces)) > self.max_bytes:
             raise ValueError(f"{self.path.name} would take more than {self.max_bytes:,} bytes")
         directory = self.path.parent
         directory.mkdir(parents=True, exist_ok=True)
@@ -169,8 +258,8 @@ class RecordFile:
         handle = os.open(temporary, _CREATE_NEW, 0o600)
         try:
             with os.fdopen(handle, "wb") as stream:
-                stream.write(MAGIC + checksum(self.fingerprint, body))
-                stream.write(body)
+                for piece in pieces:
+                    stream.write(piece)
             os.replace(temporary, self.path)
         except BaseException:
             try:

@@ -2,6 +2,12 @@
 
 Table 1 counts audited entries per model by finite or infinite r_max;
 Table 2 counts the finite ones by the sign of D(r) beyond r_max.
+
+A summary is made of one tally per file (:func:`tally`): its entries counted
+by everything the tables tell apart, and its folding entries. A file's tally
+is made where the file is audited (in a worker process, as it is parsed) and
+kept in the parse cache with its metrics; :func:`summarize` adds the
+tallies up.
 """
 
 from __future__ import annotations
@@ -113,22 +119,22 @@ class Summary:
         )
 
 
-def summarize(audit: Audit) -> Summary:
-    """Tables 1 and 2, status counts and the folding entries of an audit.
+#: A file's tally: its entries counted by (model, status, finite r_max, tail
+#: sign, rectilinear, paper's r_normalized < 1), as pairs (key, number); and
+#: its folding entries as (index in the file, r_normalized, rectilinear).
+Tally = tuple
 
-    Counted from the audit's columns in plain Python: a summary needs
-    neither the entries as objects nor numpy.
-    """
-    statuses = audit.column("status")
-    types = audit.column("type")
-    metrics = audit.metric_columns()
-    r_normalized = metrics["r_normalized"]
-    # Entries by everything the tables tell apart, counted at C speed: model,
-    # audited, finite r_max, tail sign, rectilinear, paper's r_normalized < 1.
+
+def tally(
+    models: list[str], statuses: list[str], types: list[str], metrics: dict[str, list]
+) -> Tally:
+    """The tally of one file's entries (columns of the same length), for
+    :func:`summarize`; plain data, as the parse cache stores it."""
+    # Counted at C speed, by everything the tables tell apart.
     kinds = Counter(
         zip(
-            audit.column("model"),
-            map(STATUS_OK.__eq__, statuses),
+            models,
+            statuses,
             map(math.isfinite, metrics["r_max"]),
             metrics["tail"],
             map("rectilinear".__eq__, types),
@@ -136,34 +142,54 @@ def summarize(audit: Audit) -> Summary:
             strict=True,
         )
     )
+    r_normalized = metrics["r_normalized"]
+    folding = [
+        (index, r_normalized[index], types[index] == "rectilinear")
+        for index in compress(range(len(statuses)), metrics["folds_in_image"])
+    ]
+    return list(kinds.items()), folding
+
+
+def summarize(audit: Audit) -> Summary:
+    """Tables 1 and 2, status counts and the folding entries of an audit,
+    from the tally of each of its files (see :meth:`Audit.tallies`).
+
+    Counted in plain Python: a summary needs neither the entries as objects
+    nor numpy.
+    """
     # model name -> [finite, infinite, positive, negative] over audited entries
     counts = {name: [0, 0, 0, 0] for name in (*MODELS, TOTAL)}
     audited = paper_folds = 0
     not_audited: Counter[str] = Counter()
-    for (model, ok, finite, sign, rectilinear, paper_below_one), number in kinds.items():
-        if not ok:
-            not_audited[model or "(none)"] += number
-            continue
-        audited += number
-        if finite:
-            row = (number, 0, number if sign > 0 else 0, number if sign < 0 else 0)
-            paper_folds += number if rectilinear and paper_below_one else 0
-        else:
-            row = (0, number, 0, 0)
-        for key in (model, TOTAL) if model in MODELS else (TOTAL,):
-            counts[key] = [total + value for total, value in zip(counts[key], row, strict=True)]
+    found: Counter[str] = Counter()
+    folding: list[tuple[int, float, bool]] = []
+    start = 0
+    for (kinds, file_folding), size in audit.tallies():
+        for (model, status, finite, sign, rectilinear, paper_below_one), number in kinds:
+            found[status] += number
+            if status != STATUS_OK:
+                not_audited[model or "(none)"] += number
+                continue
+            audited += number
+            if finite:
+                row = (number, 0, number if sign > 0 else 0, number if sign < 0 else 0)
+                paper_folds += number if rectilinear and paper_below_one else 0
+            else:
+                row = (0, number, 0, 0)
+            for key in (model, TOTAL) if model in MODELS else (TOTAL,):
+                counts[key] = [total + value for total, value in zip(counts[key], row, strict=True)]
+        folding += [(start + index, r, rect) for index, r, rect in file_folding]
+        start += size
     # By r_normalized, ties in entry order; NaN (never a fold, but safe) last.
-    folding = list(compress(range(len(statuses)), metrics["folds_in_image"]))
-    folding.sort(key=lambda i: (r_normalized[i] != r_normalized[i], r_normalized[i]))
-    found = Counter(statuses)
+    folding.sort(key=lambda fold: (fold[1] != fold[1], fold[1]))
     return Summary(
-        entries=len(statuses),
+        entries=start,
         audited=audited,
         files=len(audit.files),
         statuses=dict(sorted(found.items(), key=lambda kv: (kv[0] != "ok", kv[0]))),
         rows=[ModelCounts(name, *counts[name]) for name in (*MODELS, TOTAL)],
-        folding=folding,
-        folding_rectilinear=sum(types[i] == "rectilinear" for i in folding),
+        folding=[index for index, _, _ in folding],
+        folding_rectilinear=sum(rectilinear for _, _, rectilinear in folding),
         folding_paper_units_rectilinear=paper_folds,
         models_not_audited=dict(not_audited),
     )
