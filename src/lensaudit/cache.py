@@ -55,8 +55,9 @@ from __future__ import annotations
 import functools
 import os
 from array import array
+from collections import namedtuple
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from itertools import islice
 from operator import attrgetter
 from pathlib import Path
@@ -266,8 +267,9 @@ _Record = tuple[bytes, dict, str, "dict | None", str, "dict[str, str]", "tuple |
 RECORD_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
 
 
-@dataclass(frozen=True, slots=True)
-class CachedFile:
+class CachedFile(
+    namedtuple("CachedFile", ("packed", "count", "error", "metrics", "rows", "tally"))
+):
     """What the cache holds for one file's content.
 
     ``packed`` are its entries (see :func:`pack_columns`), ``count`` of them;
@@ -277,12 +279,7 @@ class CachedFile:
     the file's counts for the summary, or None.
     """
 
-    packed: dict
-    count: int
-    error: str
-    metrics: dict[str, bytes] | None
-    rows: dict[str, str]
-    tally: tuple | None
+    __slots__ = ()
 
 
 def cache_dir() -> Path:

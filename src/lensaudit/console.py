@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import os
 import sys
+from collections import namedtuple
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 # typing only for type checkers: a scan from the cache never imports it.
@@ -50,16 +50,18 @@ SCAN_OPTIONS: dict[str, str] = {
 SCAN_FLAGS = ("--cache", "--no-cache")
 
 
-@dataclass(frozen=True, slots=True)
-class ScanArguments:
-    """A scan's command line: database paths as given (none: the default
-    database), output format, kind, output file (None: standard output), cache."""
+class ScanArguments(
+    namedtuple(
+        "ScanArguments",
+        ("paths", "output_format", "kind", "output", "cache"),
+        defaults=((), "table", "distortion", None, True),
+    )
+):
+    """A scan's command line: database ``paths`` as given (a tuple; none: the
+    default database), ``output_format``, ``kind``, ``output`` file (None:
+    standard output), ``cache`` (a bool)."""
 
-    paths: tuple[str, ...] = ()
-    output_format: str = "table"
-    kind: str = "distortion"
-    output: str | None = None
-    cache: bool = True
+    __slots__ = ()
 
     @property
     def row_formats(self) -> tuple[str, ...]:

@@ -9,21 +9,22 @@ from __future__ import annotations
 
 import os
 import re
+from collections import namedtuple
 from collections.abc import Iterable
-from dataclasses import dataclass
 from importlib.util import find_spec
 from pathlib import Path
 
 from .loader import LoadError, display_path
 
 
-@dataclass(frozen=True)
-class DatabaseSource:
-    """What was audited: the paths and a human-readable description."""
+class DatabaseSource(
+    namedtuple("DatabaseSource", ("paths", "label", "bundled"), defaults=(False,))
+):
+    """What was audited: the ``paths`` (a tuple), a human-readable ``label``, and
+    whether it is the database ``bundled`` with lensfunpy. (A named tuple: a
+    dataclass would cost every scan more than it is worth.)"""
 
-    paths: tuple[Path, ...]
-    label: str
-    bundled: bool = False
+    __slots__ = ()
 
 
 def bundled_database_path() -> Path:

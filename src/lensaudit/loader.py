@@ -17,8 +17,9 @@ import os
 import re
 import stat
 import sys
+from collections import namedtuple
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from operator import itemgetter
 from pathlib import Path
 
@@ -102,22 +103,27 @@ class DistortionEntry:
     message: str = ""
 
 
-@dataclass(frozen=True, slots=True)
-class SourceFile:
-    """A file that was read: its display name, absolute path and entry count."""
+class SourceFile(namedtuple("SourceFile", ("name", "path", "entries", "error"), defaults=("",))):
+    """A file that was read: its display ``name``, absolute ``path``, the number of
+    ``entries`` read from it, and its ``error`` ("" if none).
 
-    name: str
-    path: Path
-    entries: int
-    error: str = ""
+    A named tuple rather than a dataclass: every scan imports this module, and
+    making a dataclass costs a scan more than the class is worth.
+    """
+
+    __slots__ = ()
 
 
-@dataclass(slots=True)
 class LoadResult:
-    """Records from every file, and the list of files they came from."""
+    """Records from every file (``entries``), and the list of ``files`` they came from."""
 
-    entries: list[DistortionEntry] = field(default_factory=list)
-    files: list[SourceFile] = field(default_factory=list)
+    __slots__ = ("entries", "files")
+
+    def __init__(
+        self, entries: list[DistortionEntry] | None = None, files: list[SourceFile] | None = None
+    ) -> None:
+        self.entries = [] if entries is None else entries
+        self.files = [] if files is None else files
 
 
 def parse_number(text: str | None) -> float:
@@ -190,36 +196,54 @@ def _text(element: etree._Element) -> str:
     return "".join(element.itertext()).strip()
 
 
-@dataclass(slots=True)
 class LensContext:
     """What a lens, and the ``<calibration>`` an entry is in, give each of its entries.
 
     ``problem`` is why entries of the lens cannot be audited ("" if they can),
-    ``status`` the status it gives them.
+    ``status`` the status it gives them; ``real_focals`` maps a focal length
+    to its real focal length, from the ``<real-focal-length>`` elements of
+    the calibration; ``lens_fields`` are maker, lens, mounts, type, crop
+    factor and aspect ratio, the start of each record.
+
+    A plain class (not a dataclass): every scan imports this module, and
+    making a dataclass costs a scan more than the class is worth.
     """
 
-    maker: str
-    lens: str
-    mounts: tuple[str, ...]
-    type: str
-    crop_factor: float
-    aspect_ratio: float
-    problem: str = ""  # why entries of this lens cannot be audited
-    status: str = STATUS_BAD_VALUE  # the status that problem gives
-    # focal -> real focal, from <real-focal-length> elements of the calibration
-    real_focals: dict[float, float] = field(default_factory=dict)
-    # maker, lens, mounts, type, crop factor, aspect ratio: the start of each record
-    lens_fields: tuple = field(init=False)
+    __slots__ = (
+        "maker",
+        "lens",
+        "mounts",
+        "type",
+        "crop_factor",
+        "aspect_ratio",
+        "problem",
+        "status",
+        "real_focals",
+        "lens_fields",
+    )
 
-    def __post_init__(self) -> None:
-        self.lens_fields = (
-            self.maker,
-            self.lens,
-            self.mounts,
-            self.type,
-            self.crop_factor,
-            self.aspect_ratio,
-        )
+    def __init__(
+        self,
+        maker: str,
+        lens: str,
+        mounts: tuple[str, ...],
+        lens_type: str,
+        crop_factor: float,
+        aspect_ratio: float,
+        problem: str = "",
+        status: str = STATUS_BAD_VALUE,
+        real_focals: dict[float, float] | None = None,
+    ) -> None:
+        self.maker = maker
+        self.lens = lens
+        self.mounts = mounts
+        self.type = lens_type
+        self.crop_factor = crop_factor
+        self.aspect_ratio = aspect_ratio
+        self.problem = problem
+        self.status = status
+        self.real_focals = {} if real_focals is None else real_focals
+        self.lens_fields = (maker, lens, mounts, lens_type, crop_factor, aspect_ratio)
 
     def record(
         self,
@@ -580,9 +604,14 @@ def context_of(element: etree._Element) -> LensContext:
     return calibration_context(parent, base) if parent is not None else base
 
 
-@dataclass(frozen=True, slots=True)
-class ParsedFile:
-    """A database file's XML tree, and what is wrong with the file as a whole.
+class ParsedFile(
+    namedtuple(
+        "ParsedFile",
+        ("root", "status", "line", "error", "entry_message"),
+        defaults=(STATUS_OK, 0, "", ""),
+    )
+):
+    """A database file's XML tree (``root``), and what is wrong with the file as a whole.
 
     ``status`` is ``ok``, ``xml_error`` (not well-formed: ``root`` is then
     what libxml2's recovery mode can still read, or None) or
@@ -591,11 +620,7 @@ class ParsedFile:
     ``entry_message`` what each entry read from ``root`` is marked with.
     """
 
-    root: etree._Element | None
-    status: str = STATUS_OK
-    line: int = 0
-    error: str = ""
-    entry_message: str = ""
+    __slots__ = ()
 
 
 def parse_file(data: bytes) -> ParsedFile:

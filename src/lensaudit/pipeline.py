@@ -20,7 +20,7 @@ from __future__ import annotations
 import os
 from bisect import bisect_right
 from collections.abc import Callable, Collection, Iterator, Sequence
-from dataclasses import astuple, dataclass, field
+from dataclasses import astuple
 from functools import cached_property, partial
 from itertools import accumulate
 from operator import attrgetter
@@ -79,7 +79,6 @@ _ROW_ENTRY_COLUMNS = LEADING_COLUMNS + TRAILING_COLUMNS
 _TALLIED = ("model", "status", "type")
 
 
-@dataclass(slots=True)
 class FileColumns:
     """One file of an audit: its entries as packed columns (see
     :func:`lensaudit.cache.pack_columns`), ``count`` of them, and what row
@@ -90,13 +89,25 @@ class FileColumns:
     (:func:`lensaudit.summary.tally`), where known.
     """
 
-    packed: dict
-    count: int
-    rows: dict[str, str] = field(default_factory=dict)
-    row_texts: dict[str, tuple[list[str], list[str]]] = field(default_factory=dict)
-    metrics: dict[str, list] | None = None
-    tally: Tally | None = None
-    packed_metrics: dict[str, bytes] | None = None
+    __slots__ = ("packed", "count", "rows", "row_texts", "metrics", "tally", "packed_metrics")
+
+    def __init__(
+        self,
+        packed: dict,
+        count: int,
+        rows: dict[str, str] | None = None,
+        row_texts: dict[str, tuple[list[str], list[str]]] | None = None,
+        metrics: dict[str, list] | None = None,
+        tally: Tally | None = None,
+        packed_metrics: dict[str, bytes] | None = None,
+    ) -> None:
+        self.packed = packed
+        self.count = count
+        self.rows = {} if rows is None else rows
+        self.row_texts = {} if row_texts is None else row_texts
+        self.metrics = metrics
+        self.tally = tally
+        self.packed_metrics = packed_metrics
 
     def metric_lists(self) -> dict[str, list] | None:
         """The file's metric columns, unpacked when first asked for; None if not known."""

@@ -13,8 +13,7 @@ tallies up.
 from __future__ import annotations
 
 import math
-from collections import Counter
-from dataclasses import dataclass, field
+from collections import Counter, namedtuple
 from itertools import compress
 
 from .loader import MODEL_COEFFICIENTS, STATUS_OK
@@ -30,15 +29,18 @@ MODELS = tuple(MODEL_COEFFICIENTS)
 TOTAL = "Total"
 
 
-@dataclass(frozen=True)
-class ModelCounts:
-    """One row of Tables 1 and 2 (``model`` is a model name or "Total")."""
+# Named tuples, not dataclasses: every scan that prints a summary imports
+# this module, and making a dataclass costs more than the class is worth.
 
-    model: str
-    finite: int
-    infinite: int
-    positive: int
-    negative: int
+
+class ModelCounts(
+    namedtuple("ModelCounts", ("model", "finite", "infinite", "positive", "negative"))
+):
+    """One row of Tables 1 and 2 (``model`` is a model name or "Total"): audited
+    entries with a ``finite`` and an ``infinite`` r_max, and of the finite
+    ones, those whose D(r) beyond r_max is ``positive`` or ``negative``."""
+
+    __slots__ = ()
 
     @property
     def total(self) -> int:
@@ -53,25 +55,35 @@ class ModelCounts:
         return 100.0 * self.negative / self.finite if self.finite else float("nan")
 
 
-@dataclass(frozen=True)
-class Summary:
+class Summary(
+    namedtuple(
+        "Summary",
+        (
+            "entries",
+            "audited",
+            "files",
+            "statuses",
+            "rows",
+            "folding",
+            "folding_rectilinear",
+            "folding_paper_units_rectilinear",
+            "models_not_audited",
+        ),
+    )
+):
     """What the audit found, in numbers.
 
-    ``folding`` lists the indices (into the audit's entries) of entries whose
-    fold lies inside their own image, by increasing r_normalized.
-    ``folding_paper_units`` counts rectilinear entries the paper's mixed-unit
-    formula would call folding, for comparison with the paper.
+    ``entries``, ``audited`` and ``files`` are counts; ``statuses`` counts
+    entries by status; ``rows`` are the :class:`ModelCounts` of each model,
+    then of all. ``folding`` lists the indices (into the audit's entries) of
+    entries whose fold lies inside their own image, by increasing
+    r_normalized, ``folding_rectilinear`` counts the rectilinear ones.
+    ``folding_paper_units_rectilinear`` counts rectilinear entries the
+    paper's mixed-unit formula would call folding, for comparison with the
+    paper. ``models_not_audited`` counts entries not audited, by model.
     """
 
-    entries: int
-    audited: int
-    files: int
-    statuses: dict[str, int]
-    rows: list[ModelCounts]
-    folding: list[int]
-    folding_rectilinear: int
-    folding_paper_units_rectilinear: int
-    models_not_audited: dict[str, int] = field(default_factory=dict)
+    __slots__ = ()
 
     @property
     def total(self) -> ModelCounts:

@@ -23,7 +23,6 @@ import marshal
 import os
 import sys
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from itertools import accumulate
 from pathlib import Path
 
@@ -47,16 +46,20 @@ _MAX_RESULTS = 1 << 24
 _IOV_MAX = 1024
 
 
-@dataclass(slots=True)
 class Job:
-    """A file to parse: its absolute path, display name, and its bytes if already
-    read; ``size``, if given, is the number of bytes it will have when read
-    (for contents that are not files, such as git objects)."""
+    """A file to parse: its absolute ``path``, display ``name``, and its bytes if
+    already read (``data``); ``size``, if given, is the number of bytes it will
+    have when read (for contents that are not files, such as git objects)."""
 
-    path: Path
-    name: str
-    data: bytes | None = None
-    size: int | None = None
+    __slots__ = ("path", "name", "data", "size")
+
+    def __init__(
+        self, path: Path, name: str, data: bytes | None = None, size: int | None = None
+    ) -> None:
+        self.path = path
+        self.name = name
+        self.data = data
+        self.size = size
 
 
 def parse_all(
