@@ -14,7 +14,6 @@ import tempfile
 import threading
 import time
 from array import array
-from dataclasses import astuple
 from pathlib import Path
 
 import pytest
@@ -35,7 +34,7 @@ from lensaudit.pipeline import run
 
 def normalized(entries):
     return [
-        tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in astuple(e))
+        tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in e)
         for e in entries
     ]
 
@@ -226,7 +225,7 @@ entries_strategy = st.lists(
 @given(entries_strategy)
 def test_any_entries_come_back_from_a_record_unchanged(entries):
     def exact(entry):  # repr tells -0.0 from 0.0 and makes NaN equal to itself
-        return tuple(repr(v) if isinstance(v, float) else v for v in astuple(entry))
+        return tuple(repr(v) if isinstance(v, float) else v for v in entry)
 
     record = marshal.loads(marshal.dumps(pack_entries(entries)))
     assert list(map(exact, unpack_entries(record, "x.xml"))) == list(map(exact, entries))

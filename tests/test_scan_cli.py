@@ -9,7 +9,6 @@ import math
 import os
 import subprocess
 import sys
-from dataclasses import astuple
 from pathlib import Path
 
 import pytest
@@ -452,7 +451,7 @@ def test_the_summary_of_the_bundled_database_counts_what_numpy_counts(bundled_db
 @given(audits(), st.integers(-12, 12))
 def test_one_entry_of_an_audit_is_that_of_its_entries(audit, index):
     def exact(entry):  # NaN made equal to itself
-        return tuple(repr(v) if isinstance(v, float) else v for v in astuple(entry))
+        return tuple(repr(v) if isinstance(v, float) else v for v in entry)
 
     entries = [exact(e) for e in audit.entries]
     if -len(entries) <= index < len(entries):

@@ -57,7 +57,6 @@ import os
 from array import array
 from collections import namedtuple
 from collections.abc import Callable
-from dataclasses import fields
 from itertools import islice
 from operator import attrgetter
 from pathlib import Path
@@ -69,7 +68,7 @@ except ImportError:
 
 from . import __version__, store
 from .columns import METRIC_FLAG_COLUMNS, METRIC_FLOAT_COLUMNS
-from .loader import DistortionEntry
+from .loader import ENTRY_FIELDS, DistortionEntry
 
 #: Cache files kept in the cache directory, at most (least recently used go first).
 MAX_CACHE_FILES = 16
@@ -80,13 +79,9 @@ _KIND = "parsed"  # cache files are parsed-<digest>.cache (see lensaudit.store)
 _DIGEST_SIZE = 16  # of file contents: collisions by chance are out of the question
 
 
-def _kind(annotation: object) -> str:
-    return annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
-
-
-_FIELDS = tuple(f.name for f in fields(DistortionEntry))
+_FIELDS = tuple(ENTRY_FIELDS)
 #: How each entry field is stored; ``file`` is not: it is the name given at reading.
-_KINDS = {f.name: _kind(f.type) for f in fields(DistortionEntry) if f.name != "file"}
+_KINDS = {name: kind for name, kind in ENTRY_FIELDS.items() if name != "file"}
 _KNOWN_KINDS = {"float", "int", "str", "tuple[str, ...]"}
 _PACKABLE = _FIELDS[0] == "file" and set(_KINDS.values()) <= _KNOWN_KINDS
 _SEPARATOR = "\0"

@@ -19,7 +19,6 @@ import stat
 import sys
 from collections import namedtuple
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, fields, replace
 from operator import itemgetter
 from pathlib import Path
 
@@ -69,38 +68,53 @@ class LoadError(Exception):
     """The input as a whole could not be read (no such path, no XML files)."""
 
 
-@dataclass(slots=True)
-class DistortionEntry:
-    """One ``<distortion>`` element with the lens context it applies to.
+#: The fields of a :class:`DistortionEntry`, in order, and the type of each.
+ENTRY_FIELDS = {
+    "file": "str",
+    "line": "int",
+    "maker": "str",
+    "lens": "str",
+    "mounts": "tuple[str, ...]",
+    "type": "str",
+    "crop_factor": "float",
+    "aspect_ratio": "float",
+    "model": "str",
+    "focal": "float",
+    "real_focal": "float",
+    "a": "float",
+    "b": "float",
+    "c": "float",
+    "k1": "float",
+    "k2": "float",
+    "status": "str",
+    "message": "str",
+}
 
-    Treat it as read-only (it is not frozen only because frozen dataclasses
-    are ten times slower to create, and a database has thousands of these).
 
+class DistortionEntry(
+    namedtuple(
+        "DistortionEntry",
+        tuple(ENTRY_FIELDS),
+        defaults=(NAN, NAN, NAN, NAN, NAN, NAN, STATUS_OK, ""),
+    )
+):
+    """One ``<distortion>`` element with the lens context it applies to: the
+    fields of :data:`ENTRY_FIELDS`, in that order.
+
+    A named tuple: immutable (``entry._replace(file=...)`` makes a changed
+    copy), and cheap to make by the thousand. (A dataclass would also cost
+    every scan the import of :mod:`dataclasses` and :mod:`inspect`.)
+
+    ``file`` is the name the file is reported as, ``line`` the element's line.
     Coefficients are the raw model coefficients (``a b c`` for ptlens, ``k1``
     for poly3, ``k1 k2`` for poly5); coefficients the model does not use are
     NaN. ``real_focal`` is NaN when neither a ``real-focal`` attribute nor a
     ``<real-focal-length>`` for its focal length gives it. Lengths are in
-    millimetres; crop factor and aspect ratio are plain numbers.
+    millimetres; crop factor and aspect ratio are plain numbers. ``status``
+    is ``ok`` or why the entry is not audited, ``message`` says more.
     """
 
-    file: str
-    line: int
-    maker: str
-    lens: str
-    mounts: tuple[str, ...]
-    type: str
-    crop_factor: float
-    aspect_ratio: float
-    model: str
-    focal: float
-    real_focal: float = NAN
-    a: float = NAN
-    b: float = NAN
-    c: float = NAN
-    k1: float = NAN
-    k2: float = NAN
-    status: str = STATUS_OK
-    message: str = ""
+    __slots__ = ()
 
 
 class SourceFile(namedtuple("SourceFile", ("name", "path", "entries", "error"), defaults=("",))):
@@ -426,7 +440,7 @@ _LAYOUT = {
 #: Reading a whole database makes thousands; tuples are what columns are made of.
 EntryRow = tuple
 #: The field names of an :data:`EntryRow`, in order.
-ROW_FIELDS = tuple(f.name for f in fields(DistortionEntry))[1:]
+ROW_FIELDS = tuple(ENTRY_FIELDS)[1:]
 
 
 def row_columns(rows: list[EntryRow]) -> dict[str, list]:
@@ -720,15 +734,6 @@ def _recovered_tree(data: bytes) -> etree._Element | None:
         return etree.fromstring(data, parser)
     except etree.XMLSyntaxError:
         return None
-
-
-def marked(records: Iterable[Any], status: str, message: str) -> list[Any]:
-    """Records (dataclasses with ``status`` and ``message``) given a file-level
-    status; their own problems are kept in front of ``message``."""
-    return [
-        replace(r, status=status, message=f"{r.message}; {message}" if r.message else message)
-        for r in records
-    ]
 
 
 def _error_row(line: int, status: str, message: str) -> EntryRow:

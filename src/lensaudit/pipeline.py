@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 from bisect import bisect_right
 from collections.abc import Callable, Collection, Iterator, Sequence
-from dataclasses import astuple
 from functools import cached_property, partial
 from itertools import accumulate
 from operator import attrgetter
@@ -586,7 +585,7 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True, caller: int
         data = job.data if job.data is not None else loader.read_regular_file(job.path)
     except OSError as os_error:
         entries, error = loader.unreadable_file(job.name, os_error)
-        rows = [astuple(entry)[1:] for entry in entries]
+        rows = [entry[1:] for entry in entries]
     else:
         rows, error = loader.read_rows(data)
         if digests:

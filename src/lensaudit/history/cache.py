@@ -64,7 +64,7 @@ def fingerprint() -> str:
 
 def store_format() -> bytes:
     """What the history's store files are valid for: the code and the record layout."""
-    entry = " ".join(f.name for f in fields(DistortionEntry))
+    entry = " ".join(DistortionEntry._fields)
     return f"lensaudit history 1 {fingerprint()} {' '.join(COUNT_COLUMNS)} {entry}".encode()
 
 
@@ -175,7 +175,6 @@ def _commit_data(commit: Commit | None) -> tuple | None:
 
 def history_data(history: History) -> tuple:
     """A history as marshal data (what a run's cache keeps)."""
-    entry_fields = [f.name for f in fields(DistortionEntry)]
     return (
         history.path,
         history.first_parent,
@@ -186,7 +185,7 @@ def history_data(history: History) -> tuple:
         _commit_data(history.newest),
         [
             (
-                tuple(getattr(i.entry, name) for name in entry_fields),
+                tuple(i.entry),
                 i.r_max,
                 i.d_max,
                 i.r_normalized,

@@ -7,8 +7,6 @@ holds one, the same file first; a commit introduces what no parent holds.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from .audit import Auditor, BlobAudit, Parsed, revision
 from .commits import Commit
 from .results import IntroducedEntry, Revision
@@ -152,7 +150,7 @@ def introduced_entries(
             if not np.isfinite(m.r_max[key]):
                 continue
             if entry.file != name:  # the same content under two names
-                entry = replace(entry, file=name)
+                entry = entry._replace(file=name)
             introduced.append(
                 IntroducedEntry(
                     entry,
