@@ -468,8 +468,9 @@ def _audit_files(
             if file_metrics is None:
                 parts[index] = FileColumns(packed, count, row_texts=texts)
             else:
-                parts[index] = FileColumns(packed, count, rows=texts, metrics=file_metrics)
-                parts[index].tally = file_tally
+                parts[index] = FileColumns(
+                    packed, count, rows=texts, metrics=file_metrics, tally=file_tally
+                )
             digests[index] = digest
 
     computed = None
