@@ -209,19 +209,19 @@ class RecordFile:
             return None
         try:
             head, seals = marshal.loads(body)
-            ends = []
+            spans = []  # each part's seal, and where its bytes start and end
             position = head_end
             for part_seal, length in seals:
                 if not isinstance(part_seal, bytes) or not isinstance(length, int) or length < 0:
                     return None
-                ends.append((part_seal, position, position + length))
+                spans.append((part_seal, position, position + length))
                 position += length
         except (EOFError, ValueError, TypeError):
             return None
         if position != len(data):
             return None
         self._used()
-        return head, [(part_seal, view[first:end]) for part_seal, first, end in ends]
+        return head, [(part_seal, view[first:end]) for part_seal, first, end in spans]
 
     def write(self, value: object) -> None:
         """Store ``value`` (see :meth:`write_body`)."""
