@@ -34,8 +34,7 @@ from lensaudit.pipeline import run
 
 def normalized(entries):
     return [
-        tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in e)
-        for e in entries
+        tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in e) for e in entries
     ]
 
 

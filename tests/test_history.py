@@ -799,6 +799,31 @@ def test_trend_figure_takes_history_csv_read_back(repo, tmp_path):
     assert list(entries.get_ydata()) == [expected_counts(STATES[c])["audited"] for c in MAINLINE]
 
 
+def test_trend_figure_takes_the_records_as_the_dataframe(repo):
+    history = audit_history(repo.path)
+    from_records = trend_figure(history.records())
+    from_frame = trend_figure(history.to_dataframe())
+    for mine, theirs in zip(from_records.axes, from_frame.axes, strict=True):
+        for line, other in zip(mine.lines, theirs.lines, strict=True):
+            assert list(line.get_xdata()) == list(other.get_xdata())
+            assert list(line.get_ydata()) == list(other.get_ydata())
+
+
+def test_the_history_command_draws_its_trend_without_pandas(repo, tmp_path):
+    # pandas costs a history run a tenth of a second to import, for nothing.
+    script = (
+        "import sys\n"
+        "from lensaudit.console import dispatch\n"
+        f"status = dispatch(['history', {str(repo.path)!r}, '-o', {str(tmp_path / 'out')!r}])\n"
+        "print(status, 'pandas' in sys.modules, 'matplotlib' in sys.modules)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    assert done.stdout.split()[-3:] == ["0", "False", "True"]
+    assert (tmp_path / "out" / "trend.png").stat().st_size > 0
+
+
 # --------------------------------------------------- the real Lensfun history
 
 

@@ -1,11 +1,13 @@
-"""The distortion audit parses a file without its <vignetting/> and <tca/> elements
-(loader._distortion_file); what it reads must be what the whole tree gives.
+"""The distortion audit parses a file with a placeholder for each <vignetting/>
+element Lensfun writes (loader._distortion_file), and no other check; what it
+reads, and what it finds wrong, must be what the whole tree gives.
 
 The reference is the same loader with the whole file parsed
 (loader.parse_file), on real files, on every file version of Lensfun's
 history at revisions spread over it, and on real files mutated by
-hypothesis, with mutations aimed at the cut: comments, CDATA, document
-types, namespaces and encodings around the elements it removes.
+hypothesis, with mutations aimed at the placeholders: comments, attribute
+values, processing instructions, CDATA, document types, namespaces and
+encodings around the elements they replace, and text outside the root.
 """
 
 from __future__ import annotations
@@ -37,11 +39,11 @@ def test_every_bundled_file_reads_as_the_whole_tree(bundled_db):
         assert_reads_as_whole(path.read_bytes())
 
 
-def test_the_cut_leaves_no_calibration_element_and_every_line(bundled_db):
+def test_placeholders_replace_calibration_elements_and_keep_every_line(bundled_db):
     data = (bundled_db / "slr-canon.xml").read_bytes()
-    cut = loader._CALIBRATION_ELEMENT.sub(b"", data)
-    assert b"<vignetting" not in cut and b"<tca" not in cut
-    assert cut.count(b"\n") == data.count(b"\n") and len(cut) < len(data) / 2
+    replaced = loader._CALIBRATION_ELEMENT.sub(loader._PLACEHOLDER, data)
+    assert b"<vignetting" not in replaced and replaced.count(b"<tca") < data.count(b"<tca") / 10
+    assert replaced.count(b"\n") == data.count(b"\n") and len(replaced) < len(data) / 2
 
 
 def test_file_versions_across_lensfuns_history_read_as_the_whole_tree(tmp_path):
@@ -51,8 +53,36 @@ def test_file_versions_across_lensfuns_history_read_as_the_whole_tree(tmp_path):
     assert len(versions) > 100
 
 
-#: Text that changes what the cut may remove, or how the file must be read.
+#: A <vignetting/> element as Lensfun writes it: what a placeholder replaces.
+VIGNETTING = (
+    b'<vignetting model="pa" focal="10" aperture="2.8" distance="10" k1="-0.1" k2="1e-05" k3="0"/>'
+)
+
+#: A <tca/> element as Lensfun writes it.
+TCA = b'<tca model="poly3" focal="10" br="-1e-05" vr="1.0001" bb="0" vb="0.9999"/>'
+
+#: Text that changes what a placeholder may replace, or how the file must be read.
 SNIPPETS = [
+    VIGNETTING,
+    TCA,
+    b"<!-- " + TCA + b" -- -->",
+    b"<x a='" + TCA + b"'/>",
+    TCA.replace(b'"0"', b'"--0"'),
+    TCA.replace(b' vb="0.9999"', b' vb="0.9999" vr="1"'),
+    b"<!-- " + VIGNETTING + b" -->",
+    b"<!-- -- " + VIGNETTING + b" -->",
+    b"<!--" + VIGNETTING + b"-->",
+    b"<!---" + VIGNETTING + b"--->",
+    b"<x a='" + VIGNETTING + b"'/>",
+    b"<x a='" + VIGNETTING + b"'>",
+    b"<?pi " + VIGNETTING + b" ?>",
+    b"<?pi " + VIGNETTING + b"?>",
+    VIGNETTING.replace(b' k3="0"', b' k3="0" k3="1"'),
+    VIGNETTING.replace(b' k3="0"', b' k3="0"\x0c'),
+    VIGNETTING.replace(b'"10"', b'"1\xff0"', 1),
+    VIGNETTING + VIGNETTING,
+    b"<lens>" + VIGNETTING + b"</lens>",
+    b"</lensdatabase>" + VIGNETTING,
     b"<!--",
     b"-->",
     b"-",
@@ -90,15 +120,28 @@ def insert_snippet(draw, rng, data: bytes) -> bytes:
     return data[:position] + draw(st.sampled_from(SNIPPETS)) + data[position:]
 
 
-def comment_out_element(draw, rng, data: bytes) -> bytes:
-    """A calibration element inside a comment, with or without dashes around it."""
+#: Around an element: a comment (with dashes that break it or not), an attribute
+#: value, a tag, a processing instruction, a CDATA section.
+WRAPPERS = [
+    (b"<!-- ", b" -->"),
+    (b"<!-- -", b"- -->"),
+    (b"<!--", b""),
+    (b"<!-- -- ", b" -->"),
+    (b"<x a='", b"'/>"),
+    (b'<x a="', b'"/>'),
+    (b"<x ", b">"),
+    (b"<?pi ", b" ?>"),
+    (b"<![CDATA[", b"]]>"),
+]
+
+
+def wrap_element(draw, rng, data: bytes) -> bytes:
+    """A calibration element inside something else (see :data:`WRAPPERS`)."""
     found = list(loader._CALIBRATION_ELEMENT.finditer(data))
     if not found:
         return data
     match = rng.choice(found)
-    before, after = draw(
-        st.sampled_from([(b"<!-- ", b" -->"), (b"<!-- -", b"- -->"), (b"<!--", b"")])
-    )
+    before, after = draw(st.sampled_from(WRAPPERS))
     return data[: match.start()] + before + match.group() + after + data[match.end() :]
 
 
@@ -106,7 +149,7 @@ def comment_out_element(draw, rng, data: bytes) -> bytes:
 def mutated_for_the_cut(draw) -> bytes:
     data = ORIGINAL[draw(st.sampled_from(sorted(ORIGINAL)))]
     rng = random.Random(draw(st.integers(0, 2**32)))
-    mutations = (*MUTATIONS, insert_snippet, insert_snippet, comment_out_element)
+    mutations = (*MUTATIONS, insert_snippet, insert_snippet, wrap_element, wrap_element)
     for _ in range(draw(st.integers(1, 3))):
         data = draw(st.sampled_from(mutations))(draw, rng, data)
     return data
@@ -119,8 +162,10 @@ def test_mutated_files_read_as_the_whole_tree(data):
 
 
 @pytest.mark.parametrize("snippet", SNIPPETS)
-@pytest.mark.parametrize("where", [b"<maker>Mamiya", b"<calibration>", b"<lensdatabase"])
-def test_each_snippet_in_a_lens_reads_as_the_whole_tree(snippet, where):
+@pytest.mark.parametrize(
+    "where", [b"<maker>Mamiya", b"<calibration>", b"<lensdatabase", b"</lensdatabase>", b""]
+)
+def test_each_snippet_anywhere_reads_as_the_whole_tree(snippet, where):
     data = ORIGINAL["6x6.xml"]
     position = data.index(where) + len(where)
     assert_reads_as_whole(data[:position] + snippet + data[position:])
@@ -135,3 +180,21 @@ def test_an_element_with_an_undeclared_prefix_is_not_cut():
     rows, error = loader.read_rows(data)
     assert "not defined" in error and rows[0][-2] == loader.STATUS_XML_ERROR
     assert_reads_as_whole(data)
+
+
+@pytest.mark.parametrize("before, after", WRAPPERS)
+@pytest.mark.parametrize("which", [0, -1])
+def test_a_calibration_element_in_any_context_reads_as_the_whole_tree(before, after, which):
+    data = ORIGINAL["compact-samsung.xml"]
+    match = list(loader._CALIBRATION_ELEMENT.finditer(data))[which]
+    wrapped = data[: match.start()] + before + match.group() + after + data[match.end() :]
+    assert_reads_as_whole(wrapped)
+
+
+def test_text_outside_the_root_is_an_error_with_or_without_placeholders():
+    data = ORIGINAL["compact-samsung.xml"]
+    element = loader._CALIBRATION_ELEMENT.search(data).group()
+    for changed in (element + data, data + element):
+        rows, error = loader.read_rows(changed)
+        assert error and rows[0][-2] == loader.STATUS_XML_ERROR
+        assert_reads_as_whole(changed)

@@ -665,35 +665,46 @@ def parse_file(data: bytes) -> ParsedFile:
     return ParsedFile(root)
 
 
-#: The ``<vignetting/>`` and ``<tca/>`` elements of a file as Lensfun writes them
-#: (empty, on one line): two thirds of its bytes, none of which the distortion
-#: audit reads. Not one with a ``:`` (a namespace prefix only a tree checks)
-#: or a reference.
-_CALIBRATION_ELEMENT = re.compile(rb"<(?:vignetting|tca)\s[^<>&:\r\n]*/>")
+#: A number as Lensfun writes an attribute of ``<vignetting/>``, quoted: digits
+#: and points, a leading minus, an exponent; never two dashes in a row. (The
+#: quantifiers are possessive: no backtracking, whatever the text.)
+_NUMBER = rb'"-?[.0-9]*+(?:[eE][-+]?[0-9]++)?+"'
+#: A ``<vignetting/>`` or ``<tca/>`` element exactly as Lensfun writes it, on one
+#: line: its attributes in one of the orders Lensfun writes them, each once.
+#: These are two thirds of a database's bytes, and the distortion audit reads
+#: none of them.
+_CALIBRATION_ELEMENT = re.compile(
+    rb'<(?:vignetting model="[a-z0-9]*" focal=%(n)s aperture=%(n)s distance=%(n)s'
+    rb" k1=%(n)s k2=%(n)s k3=%(n)s"
+    rb'|tca model="[a-z0-9]*" focal=%(n)s (?:vr=%(n)s vb=%(n)s'
+    rb"|br=%(n)s vr=%(n)s bb=%(n)s vb=%(n)s"
+    rb"|br=%(n)s cr=%(n)s vr=%(n)s bb=%(n)s cb=%(n)s vb=%(n)s))/>" % {b"n": _NUMBER}
+)
+#: What stands in for each of them: an empty element of no meaning to the audit.
+_PLACEHOLDER = b"<v/>"
 _ENCODING_DECLARED = re.compile(rb"""\A(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)""")
-
-
-class _Nothing:
-    """A parser target that keeps nothing: libxml2 checks the document, builds no tree."""
-
-    def close(self) -> None:
-        return None
 
 
 def _distortion_file(data: bytes) -> ParsedFile:
     """:func:`parse_file` for the distortion audit: the same tree, but for the
     ``<vignetting/>`` and ``<tca/>`` elements it never reads.
 
-    Where the whole file is well-formed (libxml2 checks it without building a
-    tree, with the options of :func:`make_parser`), those elements are cut
-    out of the text before the tree is built: an empty element removed from
-    an element's content changes no other element, no text the audit reads
-    (an element's text content joins the text around it, as before), and no
-    line number (nothing of a line break is removed); one removed from a
-    comment or a processing instruction changes nothing the audit reads
-    either. Files where text could mean something else are parsed whole: a
-    document type (entities), CDATA sections, namespaces, an encoding other
-    than UTF-8, and any file the cut text does not parse as a database.
+    Each ``<vignetting/>`` and ``<tca/>`` element written as Lensfun writes it
+    (:data:`_CALIBRATION_ELEMENT`) is replaced by :data:`_PLACEHOLDER` before
+    the tree is built. The two are interchangeable wherever they stand: both
+    are well-formed empty elements (the one replaced by its fixed form:
+    distinct attribute names, values without ``<``, ``&``, quotes or two
+    dashes); both start with ``<``, so that both are errors in an attribute
+    value, inside a tag and beside the root element; neither holds ``--`` or
+    ``?>``, so that both are allowed in a comment or a processing
+    instruction; neither holds a line break, so that no line number moves.
+    The text with the placeholders is therefore well-formed exactly when the
+    file is, and its tree is the file's with each such element renamed and
+    emptied: no element or text the audit reads changes. Files where text
+    could mean something else are parsed whole: a document type (entities),
+    CDATA sections, namespaces, an encoding other than UTF-8, and any file
+    whose text with the placeholders does not parse as a database (then
+    libxml2 says what is wrong with the file itself).
     """
     from lxml import etree
 
@@ -709,8 +720,7 @@ def _distortion_file(data: bytes) -> ParsedFile:
     ):
         return parse_file(data)
     try:
-        etree.fromstring(data, make_parser(_Nothing()))
-        root = etree.fromstring(_CALIBRATION_ELEMENT.sub(b"", data), make_parser())
+        root = etree.fromstring(_CALIBRATION_ELEMENT.sub(_PLACEHOLDER, data), make_parser())
     except etree.XMLSyntaxError:
         return parse_file(data)  # and its message
     if root.tag != DATABASE_ROOT:

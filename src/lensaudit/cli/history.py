@@ -232,7 +232,7 @@ def _draw(result, title: str) -> dict[str, bytes]:
     from ..history import trend_figure
     from ..workers import in_parallel
 
-    figure = trend_figure(result.to_dataframe(), title=title)
+    figure = trend_figure(result.records(), title=title)
     names = ("trend.png", "trend.svg")
 
     def render(name: str) -> bytes:
