@@ -665,9 +665,9 @@ def parse_file(data: bytes) -> ParsedFile:
     return ParsedFile(root)
 
 
-#: A number as Lensfun writes an attribute of ``<vignetting/>``, quoted: digits
-#: and points, a leading minus, an exponent; never two dashes in a row. (The
-#: quantifiers are possessive: no backtracking, whatever the text.)
+#: A number as Lensfun writes one in a ``<vignetting/>`` or ``<tca/>`` attribute,
+#: quoted: digits and points, a leading minus, an exponent; never two dashes in
+#: a row. (The quantifiers are possessive: no backtracking, whatever the text.)
 _NUMBER = rb'"-?[.0-9]*+(?:[eE][-+]?[0-9]++)?+"'
 #: A ``<vignetting/>`` or ``<tca/>`` element exactly as Lensfun writes it, on one
 #: line: its attributes in one of the orders Lensfun writes them, each once.
