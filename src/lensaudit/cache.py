@@ -316,15 +316,14 @@ def sealed_record(
     name: str,
     rows: dict[str, str],
     tally: tuple | None,
-) -> tuple[bytes, bytes, _Record]:
+) -> tuple[bytes, bytes]:
     """What the cache stores of one file, as the sealed part of a cache file:
-    ``(seal, body, record)`` (see :func:`lensaudit.store.sealed`), for
+    ``(seal, body)`` (see :func:`lensaudit.store.sealed`), for
     :meth:`ParseCache.store_sealed`. Made where the file is parsed: a worker
     process seals its records while the others parse. Raises ValueError (or
     another of :data:`RECORD_ERRORS`) for what cannot be stored."""
     packed_metrics = None if metrics is None else pack_metrics(metrics)
-    record = (digest, packed, error, packed_metrics, name, rows, tally)
-    return (*store.sealed(record), record)
+    return store.sealed((digest, packed, error, packed_metrics, name, rows, tally))
 
 
 class _Held:

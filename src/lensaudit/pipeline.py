@@ -528,9 +528,8 @@ def _unsealed(job: Job, result: tuple, store: ParseCache) -> tuple[SourceFile, F
     which ``store`` keeps as it is."""
     import marshal
 
-    _, part_seal, body, record = result
-    if record is None:  # sent by a worker
-        record = marshal.loads(body)
+    _, part_seal, body = result
+    record = marshal.loads(body)
     digest, packed, error, packed_metrics, _, rows, file_tally = record
     count = packed["count"]
     store.store_sealed(job.path, part_seal, body, record)
@@ -560,17 +559,15 @@ def file_parser(formats: tuple[str, ...], digests: bool) -> Callable[[Job], tupl
 
     for name in formats:
         row_format(name)
-    return partial(_parse, formats=formats, digests=digests, caller=os.getpid())
+    return partial(_parse, formats=formats, digests=digests)
 
 
-def _parse(job: Job, formats: tuple[str, ...], digests: bool = True, caller: int = 0) -> tuple:
+def _parse(job: Job, formats: tuple[str, ...], digests: bool = True) -> tuple:
     """What the audit needs of one file.
 
     With ``digests`` (for the cache), and where :mod:`lensaudit.scalar` gives
-    every metric: ``(_SEALED, seal, body, record)``, the file's cache record
-    sealed (see :func:`lensaudit.cache.sealed_record`), and the record itself
-    if this is the process ``caller`` (a worker sends None instead: the
-    caller reads the record from its bytes). Otherwise ``(_PLAIN, digest,
+    every metric: ``(_SEALED, seal, body)``, the file's cache record sealed
+    (see :func:`lensaudit.cache.sealed_record`). Otherwise ``(_PLAIN, digest,
     packed, count, error, metrics, texts, tally)``: the digest of the bytes
     parsed (None if unreadable, or not wanted), packed entries, their count,
     the file error, the metrics (None if :mod:`lensaudit.scalar` leaves any
@@ -610,13 +607,11 @@ def _parse(job: Job, formats: tuple[str, ...], digests: bool = True, caller: int
                 texts[name] = module.file_rows(columns, metrics)
     if digest is not None and metrics is not None:
         try:
-            seal, body, record = sealed_record(
-                digest, packed, error, metrics, job.name, texts, file_tally
-            )
+            seal, body = sealed_record(digest, packed, error, metrics, job.name, texts, file_tally)
         except RECORD_ERRORS:  # stored later, or not at all, as the cache decides
             pass
         else:
-            return _SEALED, seal, body, record if os.getpid() == caller else None
+            return _SEALED, seal, body
     return _PLAIN, digest, packed, len(rows), error, metrics, texts, file_tally
 
 

@@ -243,7 +243,8 @@ class RecordFile:
         what the file's checksum covers.
         """
         body = marshal.dumps((head, [(part_seal, len(part)) for part_seal, part in parts]))
-        start = PARTS_MAGIC + checksum(self.fingerprint, body) + len(body).to_bytes(8, "little")
+        length = len(body).to_bytes(_LENGTH_SIZE, "little")
+        start = PARTS_MAGIC + checksum(self.fingerprint, body) + length
         self._write([start, body, *(part for _, part in parts)])
 
     def _write(self, pieces: list[bytes | memoryview]) -> None:
