@@ -1,0 +1,48 @@
+"""Outputs are byte-identical to the ones made before the one-reader redesign.
+
+tests/golden/capture.py runs scan (csv, json, vignetting, tca), check (json)
+and report on the bundled database and on the master of Lensfun's history
+bundle, and history over the whole bundle; tests/golden/digests.json holds
+what it gave with the code named there. A digest listed under ``changed``
+was captured again after a change made on purpose, which it names.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import HISTORY_BUNDLE
+
+GOLDEN = Path(__file__).parent / "golden"
+
+
+@pytest.fixture(scope="module")
+def captured(bundled_db: Path, tmp_path_factory) -> dict:
+    if not HISTORY_BUNDLE.is_file():
+        pytest.skip(f"no Lensfun history bundle at {HISTORY_BUNDLE}")
+    clone = tmp_path_factory.mktemp("golden") / "lensfun"
+    subprocess.run(
+        ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)], check=True, capture_output=True
+    )
+    result = subprocess.run(
+        [sys.executable, str(GOLDEN / "capture.py"), str(bundled_db), str(clone)],
+        capture_output=True,
+        check=True,
+    )
+    return json.loads(result.stdout)
+
+
+EXPECTED = json.loads((GOLDEN / "digests.json").read_text())
+
+
+@pytest.mark.parametrize("output", sorted(EXPECTED["digests"]))
+def test_output_is_unchanged(captured: dict, output: str) -> None:
+    assert captured[output] == EXPECTED["digests"][output], (
+        f"{output} differs from its golden digest; if on purpose, capture it again and "
+        "say why under 'changed' in tests/golden/digests.json"
+    )
