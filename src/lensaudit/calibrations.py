@@ -1,39 +1,27 @@
-"""Read Lensfun's ``<vignetting>`` and ``<tca>`` elements, and what both audits share.
+"""What the vignetting and TCA audits share: their records, the audit of one
+kind as columns, and where the derivative of a cubic changes sign.
 
-Every ``<vignetting>`` and every ``<tca>`` element of the input gives exactly
-one record, with the lens context the distortion loader gives a
-``<distortion>`` (maker, lens, type, crop factor and aspect ratio, with the
-overrides of ``<calibration>`` applied the same way), a ``status`` and a
-``message``, in the same vocabulary as :mod:`lensaudit.loader`. A file that
-cannot be read, is not well-formed or is not a database gives a record of
-its own in both lists, so that the vignetting and TCA audits each account
-for every file.
+The records are the rows :mod:`lensaudit.read` reads from every
+``<vignetting>`` and ``<tca>`` element (with the lens context a
+``<distortion>`` gets, a ``status`` and a ``message``); a file that cannot
+be read, is not well-formed or is not a database has a row of its own in
+both, so that the vignetting and TCA audits each account for every file.
 
-Attribute defaults are liblensfun's (``libs/lensfun/database.cpp``, the
-``<tca>`` and ``<vignetting>`` branches of its XML parser): a missing TCA
-``vr``/``vb`` (``kr``/``kb`` for ``linear``) is 1 and the other
-coefficients 0; a missing vignetting ``k1``/``k2``/``k3`` is 0. liblensfun
-reads a missing ``focal``, ``aperture`` or ``distance`` as 0, which no
-calibration means; here such an entry is ``missing_attribute``.
-
-The second half of the module is the numerical kernel both audits share:
-where the derivative of a cubic changes sign, decided exactly on the
-binary64 inputs.
+The numerical kernel both audits share decides where the derivative of a
+cubic changes sign exactly on the binary64 inputs.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from operator import attrgetter, itemgetter
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
-from . import loader
-from .loader import (
+from .read.paths import DatabaseSource
+from .read.records import (
     NAN,
     STATUS_BAD_VALUE,
     STATUS_MISSING_ATTRIBUTE,
@@ -43,19 +31,13 @@ from .loader import (
     STATUS_UNKNOWN_MODEL,
     STATUS_UNREADABLE,
     STATUS_XML_ERROR,
-    LensContext,
     SourceFile,
-    status_of,
 )
+from .read.tables import SPECS, TCA, VIGNETTING
 
 if TYPE_CHECKING:
     import numpy as np
-    from lxml import etree
     from numpy.typing import NDArray
-
-VIGNETTING = "vignetting"
-TCA = "tca"
-KINDS = (VIGNETTING, TCA)
 
 
 @dataclass(slots=True)
@@ -115,168 +97,10 @@ class TCAEntry(CalibrationEntry):
     message: str = ""
 
 
-@dataclass(frozen=True)
-class _Spec:
-    """How one element kind is read."""
-
-    tag: str
-    entry: type
-    # model -> coefficient attributes and their defaults
-    models: dict[str, dict[str, float]]
-    # attributes every entry must have, besides model=
-    required: tuple[str, ...]
-    # record fields between "focal" and "status", in order
-    fields: tuple[str, ...]
-
-    @property
-    def row_fields(self) -> tuple[str, ...]:
-        """The names of a row's values (see :data:`CalibrationRow`)."""
-        return (*_HEAD_FIELDS, *self.fields, "status", "message")
-
-
-#: The fields every record starts with, after ``file``.
-_HEAD_FIELDS = ("line", "maker", "lens", "type", "crop_factor", "aspect_ratio", "model", "focal")
-
-SPECS = {
-    VIGNETTING: _Spec(
-        "vignetting",
-        VignettingEntry,
-        {"pa": {"k1": 0.0, "k2": 0.0, "k3": 0.0}},
-        ("focal", "aperture", "distance"),
-        ("aperture", "distance", "k1", "k2", "k3"),
-    ),
-    TCA: _Spec(
-        "tca",
-        TCAEntry,
-        {
-            "poly3": {"vr": 1.0, "vb": 1.0, "cr": 0.0, "cb": 0.0, "br": 0.0, "bb": 0.0},
-            "linear": {"kr": 1.0, "kb": 1.0},
-        },
-        ("focal",),
-        ("kr", "kb", "vr", "vb", "cr", "cb", "br", "bb"),
-    ),
-}
+#: The entry class of each kind.
+ENTRY_CLASSES = {VIGNETTING: VignettingEntry, TCA: TCAEntry}
 #: Model names each kind can audit.
 MODELS = {kind: tuple(spec.models) for kind, spec in SPECS.items()}
-
-#: A record as a plain tuple: the fields of its entry class after ``file``
-#: (see :attr:`_Spec.row_fields`). A database has tens of thousands of
-#: ``<vignetting>`` elements; rows are cheap to make and to turn into columns.
-CalibrationRow = tuple
-
-
-class _Fast(NamedTuple):
-    """The short path of one (kind, model): the attributes read, in order, the
-    text each defaults to (None: required), and the getter of ``focal`` and
-    the record fields from their values (with NaN appended at the end)."""
-
-    names: tuple[str, ...]
-    defaults: tuple[str | None, ...]
-    layout: Callable[[list[float]], tuple[float, ...]]
-
-
-def _fast(spec: _Spec, model: str) -> _Fast:
-    coefficients = spec.models[model]
-    names = spec.required + tuple(coefficients)
-    defaults = (None,) * len(spec.required) + tuple(repr(v) for v in coefficients.values())
-    missing = len(names)  # the index of the NaN appended to the values
-    wanted = ("focal", *spec.fields)
-    return _Fast(
-        names, defaults, itemgetter(*(names.index(n) if n in names else missing for n in wanted))
-    )
-
-
-_FAST = {spec.tag: {model: _fast(spec, model) for model in spec.models} for spec in SPECS.values()}
-
-
-class _Numbers(dict[str, float]):
-    """float() of texts, each worked out once: a database repeats its focal
-    lengths, apertures, distances and often whole sets of coefficients."""
-
-    def __missing__(self, text: str) -> float:
-        value = self[text] = float(text)
-        return value
-
-
-#: The numbers met so far, shared by the files of a database; at most
-#: :data:`_NUMBERS_KEPT` (Lensfun's database has about 30,000 distinct ones).
-_NUMBERS = _Numbers()
-_NUMBERS_KEPT = 1 << 16
-
-
-def _row(
-    spec: _Spec,
-    element: etree._Element,
-    lens: tuple,
-    context: LensContext,
-    number: Callable[[str], float] = float,
-) -> CalibrationRow:
-    """The row of one element; ``lens`` is (maker, lens, type, crop factor, aspect
-    ratio) of ``context``, ``number`` is float() or a memo of it. The common
-    case (plain numbers) takes a short path; anything else is examined in
-    full by :func:`_checked_row`, to the same result."""
-    get = element.get
-    model = get("model")
-    fast = _FAST[spec.tag].get(model)  # type: ignore[arg-type]
-    if fast is not None and not context.problem:
-        texts = list(map(get, fast.names, fast.defaults))
-        if None not in texts:  # every required attribute is there
-            joined = "".join(texts)
-            # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
-            if joined.isascii() and "_" not in joined:
-                try:
-                    values = list(map(number, texts))
-                except ValueError:
-                    values = None
-                if values is not None:
-                    total = sum(values)
-                    # All finite, and the required ones (listed first) positive.
-                    if total - total == 0 and min(values[: len(spec.required)]) > 0:
-                        values.append(NAN)
-                        return (
-                            element.sourceline or 0,
-                            *lens,
-                            model,
-                            *fast.layout(values),
-                            STATUS_OK,
-                            "",
-                        )
-    return _checked_row(spec, element, context)
-
-
-def _checked_row(spec: _Spec, element: etree._Element, context: LensContext) -> CalibrationRow:
-    """The row of one element, every problem noted."""
-    required = [(attribute, None) for attribute in spec.required]
-    model, values, problems = loader.checked_attributes(element, required, spec.models, context)
-    return (
-        element.sourceline or 0,
-        *_lens_of(context),
-        model,
-        values.get("focal", NAN),
-        *[values.get(f, NAN) for f in spec.fields],
-        *status_of(problems),
-    )
-
-
-def _lens_of(context: LensContext) -> tuple:
-    return context.maker, context.lens, context.type, context.crop_factor, context.aspect_ratio
-
-
-def rows_from_tree(root: etree._Element) -> tuple[list[CalibrationRow], list[CalibrationRow]]:
-    """(vignetting, tca) rows for the elements under ``root``, in document order."""
-    found: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
-    specs = {spec.tag: (spec, found[kind]) for kind, spec in SPECS.items()}
-    last = lens = None
-    if len(_NUMBERS) > _NUMBERS_KEPT:
-        _NUMBERS.clear()
-    number = _NUMBERS.__getitem__
-    # The lens context is the one the distortion loader gives a <distortion>.
-    for element, context in loader.elements_in_context(root, tuple(specs)):
-        if context is not last:
-            last, lens = context, _lens_of(context)
-        spec, out = specs[element.tag]
-        out.append(_row(spec, element, lens, context, number))
-    return found[VIGNETTING], found[TCA]
 
 
 class CalibrationRecords(Sequence[Any]):
@@ -287,15 +111,15 @@ class CalibrationRecords(Sequence[Any]):
     record without making any.
     """
 
-    def __init__(self, kind: str, names: list[str], rows: list[CalibrationRow]) -> None:
+    def __init__(self, kind: str, names: list[str], rows: list[tuple]) -> None:
         self.kind = kind
-        self._entry = SPECS[kind].entry
+        self._entry = ENTRY_CLASSES[kind]
         self._names = names  # the file of each row
         self._rows = rows
         self._columns: dict[str, list[Any]] = {}
 
     @classmethod
-    def of_file(cls, kind: str, name: str, rows: list[CalibrationRow]) -> CalibrationRecords:
+    def of_file(cls, kind: str, name: str, rows: list[tuple]) -> CalibrationRecords:
         """The rows of one file, named ``name``."""
         return cls(kind, [name] * len(rows), rows)
 
@@ -312,7 +136,7 @@ class CalibrationRecords(Sequence[Any]):
     def joined(cls, kind: str, parts: Iterable[CalibrationRecords]) -> CalibrationRecords:
         """The records of ``parts``, one after the other."""
         names: list[str] = []
-        rows: list[CalibrationRow] = []
+        rows: list[tuple] = []
         for part in parts:
             names += part._names
             rows += part._rows
@@ -346,131 +170,14 @@ class CalibrationRecords(Sequence[Any]):
         return values
 
 
-def entries_from_tree(
-    root: etree._Element, name: str
-) -> tuple[CalibrationRecords, CalibrationRecords]:
-    """(vignetting, tca) records for the elements under ``root``, in document order."""
-    vignetting, tca = rows_from_tree(root)
-    return (
-        CalibrationRecords.of_file(VIGNETTING, name, vignetting),
-        CalibrationRecords.of_file(TCA, name, tca),
-    )
+def load(paths: Any = None) -> Any:
+    """The database (see :func:`lensaudit.read.read`) of directories and/or XML
+    files, read with its vignetting and TCA rows; the bundled database
+    without ``paths``. Raises :class:`lensaudit.read.LoadError` when the paths
+    cannot be read at all."""
+    from .read import read
 
-
-@dataclass(slots=True)
-class CalibrationLoad:
-    """Records of every file, per kind, and the files they came from."""
-
-    vignetting: CalibrationRecords
-    tca: CalibrationRecords
-    files: list[SourceFile] = field(default_factory=list)
-
-    def entries(self, kind: str) -> CalibrationRecords:
-        """The records of one kind (``vignetting`` or ``tca``)."""
-        return self.vignetting if kind == VIGNETTING else self.tca
-
-
-def _error_row(spec: _Spec, line: int, status: str, message: str) -> CalibrationRow:
-    return (line, "", "", "", NAN, NAN, "", NAN, *(NAN,) * len(spec.fields), status, message)
-
-
-def _marked(rows: list[CalibrationRow], status: str, message: str) -> list[CalibrationRow]:
-    """Rows given a file-level status; their own problems kept in front of ``message``."""
-    return [(*r[:-2], status, f"{r[-1]}; {message}" if r[-1] else message) for r in rows]
-
-
-def read_rows(data: bytes) -> tuple[list[CalibrationRow], list[CalibrationRow], str]:
-    """(vignetting rows, tca rows, the file's error message or "") of one file.
-
-    A file that is not well-formed XML gives an ``xml_error`` row at the
-    error's line in both lists, then what libxml2's recovery mode can still
-    read, each marked ``xml_error``; a file whose root is not
-    ``<lensdatabase>`` gives a ``not_database`` row, then its elements,
-    each so marked.
-    """
-    parsed = loader.parse_file(data)
-    found = ([], []) if parsed.root is None else rows_from_tree(parsed.root)
-    if not parsed.error:
-        return found[0], found[1], ""
-    out = []
-    for kind, rows in zip(KINDS, found, strict=True):
-        head = _error_row(SPECS[kind], parsed.line, parsed.status, parsed.error)
-        out.append([head, *_marked(rows, parsed.status, parsed.entry_message)])
-    return out[0], out[1], parsed.error
-
-
-def read_bytes(data: bytes, name: str) -> tuple[CalibrationRecords, CalibrationRecords, str]:
-    """(vignetting records, tca records, the file's error message or "") of one
-    file, as :func:`read_rows` reads it."""
-    vignetting, tca, error = read_rows(data)
-    return (
-        CalibrationRecords.of_file(VIGNETTING, name, vignetting),
-        CalibrationRecords.of_file(TCA, name, tca),
-        error,
-    )
-
-
-def load_files(
-    targets: Iterable[tuple[Path, str]], meanwhile: Callable[[], object] | None = None
-) -> CalibrationLoad:
-    """Read (path, display name) pairs, as :func:`lensaudit.loader.expand` gives them.
-
-    A file that cannot be read gives an ``unreadable`` record in both lists.
-    Files are parsed in worker processes where that pays (see
-    :func:`lensaudit.workers.parse_all`), while this process imports the
-    audits, and numpy with them, then runs ``meanwhile()`` if given.
-    """
-    from .workers import Job, parse_all
-
-    def imports() -> None:
-        from . import tca, vignetting  # noqa: F401  (the imports are the point)
-
-        if meanwhile is not None:
-            meanwhile()
-
-    jobs = [Job(Path(path).resolve(), name) for path, name in targets]
-    found = parse_all(jobs, _read_job, imports)
-    names: dict[str, list[str]] = {VIGNETTING: [], TCA: []}
-    rows: dict[str, list[CalibrationRow]] = {VIGNETTING: [], TCA: []}
-    files = []
-    for job, (vignetting, tca, error) in zip(jobs, found, strict=True):
-        for kind, kind_rows in ((VIGNETTING, vignetting), (TCA, tca)):
-            names[kind] += [job.name] * len(kind_rows)
-            rows[kind] += kind_rows
-        files.append(SourceFile(job.name, job.path, len(vignetting) + len(tca), error))
-    return CalibrationLoad(
-        *(CalibrationRecords(kind, names[kind], rows[kind]) for kind in KINDS), files
-    )
-
-
-def _read_job(job: Any) -> tuple[list[CalibrationRow], list[CalibrationRow], str]:
-    """:func:`read_rows` of a file (a :class:`lensaudit.workers.Job`), or its
-    ``unreadable`` rows: marshal data, as a worker process sends it."""
-    try:
-        return read_rows(loader.read_file(job.path))
-    except OSError as os_error:
-        error = loader.unreadable_file(job.name, os_error)[1]
-        return (
-            [_error_row(SPECS[VIGNETTING], 0, STATUS_UNREADABLE, error)],
-            [_error_row(SPECS[TCA], 0, STATUS_UNREADABLE, error)],
-            error,
-        )
-
-
-def load(
-    paths: Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None = None,
-) -> tuple[Any, CalibrationLoad]:
-    """(database source, records) of database directories and/or XML files.
-
-    Without ``paths``, the database bundled with lensfunpy. Raises
-    :class:`lensaudit.loader.LoadError` when the paths cannot be read at all.
-    """
-    from . import database
-
-    if isinstance(paths, (str, os.PathLike)):
-        paths = [paths]
-    source = database.resolve(list(paths) if paths else None)
-    return source, load_files(loader.expand(source.paths))
+    return read(paths, calibrations=True)
 
 
 # ---------------------------------------------------------------------------
@@ -743,7 +450,6 @@ class CalibrationAudit:
         others' metrics are empty (NaN, False or "")."""
         import numpy as np
 
-        from . import database
         from .metrics import is_circular_fisheye
 
         records = CalibrationRecords.of_entries(cls.kind, entries)
@@ -776,21 +482,26 @@ class CalibrationAudit:
             full[rows] = column
             metrics[name] = full
         if source is None:
-            source = database.DatabaseSource((), "entries given in memory")
+            source = DatabaseSource((), "entries given in memory")
         return cls(source, files or [], records, metrics)
 
     @classmethod
-    def from_load(cls, loaded: CalibrationLoad, source: Any = None) -> Any:
-        """The audit of the records of this kind in ``loaded``."""
-        return cls.of_entries(loaded.entries(cls.kind), source, loaded.files)
+    def of_database(cls, database: Any) -> Any:
+        """The audit of the rows of this kind of a database read with its
+        calibrations (see :func:`lensaudit.read.read`)."""
+        names, rows = database.rows(cls.kind)
+        files = [
+            SourceFile(f.name, f.path, len(f.vignetting) + len(f.tca), f.error)
+            for f in database.files
+        ]
+        return cls.of_entries(CalibrationRecords(cls.kind, names, rows), database.source, files)
 
     @classmethod
     def read(cls, paths: Any = None) -> Any:
         """Audit the entries of this kind in database directories and/or XML
         files (the bundled database without ``paths``). Raises
-        :class:`lensaudit.loader.LoadError` when the paths cannot be read at all."""
-        source, loaded = load(paths)
-        return cls.from_load(loaded, source)
+        :class:`lensaudit.read.LoadError` when the paths cannot be read at all."""
+        return cls.of_database(load(paths))
 
     @staticmethod
     def compute_audited(

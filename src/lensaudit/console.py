@@ -63,11 +63,6 @@ class ScanArguments(
 
     __slots__ = ()
 
-    @property
-    def row_formats(self) -> tuple[str, ...]:
-        """The formats whose rows are rendered per file (see :mod:`lensaudit.formats`)."""
-        return (self.output_format,) if self.output_format in ("csv", "json") else ()
-
 
 def scan_arguments(words: list[str]) -> ScanArguments | None:
     """What ``lensaudit scan WORDS...`` asks for, or None unless that is plain:
@@ -117,7 +112,7 @@ def fail(message: str) -> NoReturn:
 
 def os_error_message(error: OSError) -> str:
     """The one line an error of the file system is reported with."""
-    from .loader import display_path
+    from .read.paths import display_path
 
     where = f"{display_path(error.filename)}: " if error.filename is not None else ""
     return f"lensaudit: error: {where}{error.strerror or error}"
@@ -152,7 +147,7 @@ def scan(arguments: ScanArguments) -> None:
     """Run ``lensaudit scan`` (see ``lensaudit scan --help``)."""
     import gc
 
-    from .loader import LoadError
+    from .read.records import LoadError
 
     paths = [Path(path) for path in arguments.paths]
     output = None if arguments.output is None else Path(arguments.output)
@@ -169,7 +164,7 @@ def scan(arguments: ScanArguments) -> None:
         from .pipeline import run as audit
 
         try:
-            result = audit(paths or None, cache=arguments.cache, formats=arguments.row_formats)
+            result = audit(paths or None, cache=arguments.cache)
         except LoadError as error:
             fail(str(error))
         if result.files and all(f.error for f in result.files):
@@ -190,15 +185,16 @@ def _scan_calibrations(
     from importlib import import_module
 
     from .calibrations import load
-    from .loader import LoadError
+    from .read.records import LoadError
 
     try:
-        source, loaded = load(paths or None)
+        database = load(paths or None)
     except LoadError as error:
         fail(str(error))
-    if loaded.files and all(f.error for f in loaded.files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in loaded.files))
-    audit = import_module(f"lensaudit.{kind}").from_load(loaded, source)
+    files = database.files
+    if files and all(f.error for f in files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
+    audit = import_module(f"lensaudit.{kind}").of_database(database)
     with output_stream(output) as stream:
         audit.write(output_format, stream)
 

@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import normalizer, scalar
-from .solver import min_positive_root
+from . import normalizer
+from .solver import kernel
+from .solver.arrays import min_positive_root
 
 # Exact arithmetic is imported where it is needed: few inputs ever take that path.
 if TYPE_CHECKING:
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
-HALF_DIAGONAL_MM = scalar.HALF_DIAGONAL_MM
+HALF_DIAGONAL_MM = kernel.HALF_DIAGONAL_MM
 
 TAIL_POSITIVE = "positive"
 TAIL_NEGATIVE = "negative"
@@ -145,11 +146,11 @@ def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
     """
     aspect = np.asarray(aspect_ratio, dtype=np.float64)
     # math.hypot, once per distinct ratio: numpy's hypot is the C library's,
-    # which may round differently, and scalar.entry_metrics must agree.
+    # which may round differently, and kernel.entry_metrics must agree.
     values = aspect.ravel().tolist()
-    corners = {x: scalar.image_corner(x) for x in dict.fromkeys(values)}
+    corners = {x: kernel.image_corner(x) for x in dict.fromkeys(values)}
     # 0.0 and -0.0 are one key but two ratios (+inf and -inf inverted): those directly.
-    radii = [corners[x] if x else scalar.image_corner(x) for x in values]
+    radii = [corners[x] if x else kernel.image_corner(x) for x in values]
     return np.array(radii, dtype=np.float64).reshape(aspect.shape)
 
 
@@ -159,7 +160,7 @@ IMAGE_CIRCLE = 1.0
 
 
 #: Whether the database says a lens draws an image circle inside the frame.
-is_circular_fisheye = scalar.is_circular_fisheye
+is_circular_fisheye = kernel.is_circular_fisheye
 
 
 def image_radius(aspect_ratio: ArrayLike, circular: ArrayLike | None = None) -> FloatArray:

@@ -3,11 +3,8 @@
 Table 1 counts audited entries per model by finite or infinite r_max;
 Table 2 counts the finite ones by the sign of D(r) beyond r_max.
 
-A summary is made of one tally per file (:func:`tally`): its entries counted
-by everything the tables tell apart, and its folding entries. A file's tally
-is made where the file is audited (in a worker process, as it is parsed) and
-kept in the parse cache with its metrics; :func:`summarize` adds the
-tallies up.
+A summary is made of a tally of the entries (:func:`tally`): the entries
+counted by everything the tables tell apart, and the folding entries.
 """
 
 from __future__ import annotations
@@ -16,7 +13,7 @@ import math
 from collections import Counter, namedtuple
 from itertools import compress
 
-from .loader import MODEL_COEFFICIENTS, STATUS_OK
+from .read.records import MODEL_COEFFICIENTS, STATUS_OK
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -131,7 +128,7 @@ class Summary(
         )
 
 
-#: A file's tally: its entries counted by (model, status, finite r_max, tail
+#: A tally: entries counted by (model, status, finite r_max, tail
 #: sign, rectilinear, paper's r_normalized < 1), as pairs (key, number); and
 #: its folding entries as (index in the file, r_normalized, rectilinear).
 Tally = tuple
@@ -140,8 +137,7 @@ Tally = tuple
 def tally(
     models: list[str], statuses: list[str], types: list[str], metrics: dict[str, list]
 ) -> Tally:
-    """The tally of one file's entries (columns of the same length), for
-    :func:`summarize`; plain data, as the parse cache stores it."""
+    """The tally of entries given as columns of the same length, for :func:`summarize`."""
     # Counted at C speed, by everything the tables tell apart.
     kinds = Counter(
         zip(
@@ -163,8 +159,8 @@ def tally(
 
 
 def summarize(audit: Audit) -> Summary:
-    """Tables 1 and 2, status counts and the folding entries of an audit,
-    from the tally of each of its files (see :meth:`Audit.tallies`).
+    """Tables 1 and 2, status counts and the folding entries of an audit, from
+    the tally of its entries (see :func:`tally`).
 
     Counted in plain Python: a summary needs neither the entries as objects
     nor numpy.
@@ -174,28 +170,25 @@ def summarize(audit: Audit) -> Summary:
     audited = paper_folds = 0
     not_audited: Counter[str] = Counter()
     found: Counter[str] = Counter()
-    folding: list[tuple[int, float, bool]] = []
-    start = 0
-    for (kinds, file_folding), size in audit.tallies():
-        for (model, status, finite, sign, rectilinear, paper_below_one), number in kinds:
-            found[status] += number
-            if status != STATUS_OK:
-                not_audited[model or "(none)"] += number
-                continue
-            audited += number
-            if finite:
-                row = (number, 0, number if sign > 0 else 0, number if sign < 0 else 0)
-                paper_folds += number if rectilinear and paper_below_one else 0
-            else:
-                row = (0, number, 0, 0)
-            for key in (model, TOTAL) if model in MODELS else (TOTAL,):
-                counts[key] = [total + value for total, value in zip(counts[key], row, strict=True)]
-        folding += [(start + index, r, rect) for index, r, rect in file_folding]
-        start += size
+    columns = [audit.entry_column(name) for name in ("model", "status", "type")]
+    kinds, folding = tally(*columns, audit.metric_columns())
+    for (model, status, finite, sign, rectilinear, paper_below_one), number in kinds:
+        found[status] += number
+        if status != STATUS_OK:
+            not_audited[model or "(none)"] += number
+            continue
+        audited += number
+        if finite:
+            row = (number, 0, number if sign > 0 else 0, number if sign < 0 else 0)
+            paper_folds += number if rectilinear and paper_below_one else 0
+        else:
+            row = (0, number, 0, 0)
+        for key in (model, TOTAL) if model in MODELS else (TOTAL,):
+            counts[key] = [total + value for total, value in zip(counts[key], row, strict=True)]
     # By r_normalized, ties in entry order; NaN (never a fold, but safe) last.
     folding.sort(key=lambda fold: (fold[1] != fold[1], fold[1]))
     return Summary(
-        entries=start,
+        entries=len(audit),
         audited=audited,
         files=len(audit.files),
         statuses=dict(sorted(found.items(), key=lambda kv: (kv[0] != "ok", kv[0]))),

@@ -227,7 +227,7 @@ class TCAAudit(CalibrationAudit):
 # The module's entry points are the audit class's.
 audit_entries = TCAAudit.of_entries
 audit = TCAAudit.read
-from_load = TCAAudit.from_load
+of_database = TCAAudit.of_database
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:

@@ -196,7 +196,7 @@ def compute(
     ``r_corner`` is the radius of the image judged, r = 1 at half the
     diagonal. Returns arrays keyed by column name, ``severity`` as text.
     """
-    from .solver import min_positive_root
+    from .solver.arrays import min_positive_root
 
     k1, k2, k3, r_corner = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (k1, k2, k3, r_corner))
@@ -363,7 +363,7 @@ class VignettingAudit(CalibrationAudit):
 # The module's entry points are the audit class's.
 audit_entries = VignettingAudit.of_entries
 audit = VignettingAudit.read
-from_load = VignettingAudit.from_load
+of_database = VignettingAudit.of_database
 
 
 def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:

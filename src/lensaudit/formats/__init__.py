@@ -1,12 +1,10 @@
-"""Output formats of an audit: one module per format, each with ``write(audit, stream)``.
+"""Output formats of an audit: one module per format, each with one entry
+point, ``write(audit, stream)``.
 
-Formats that write a row per entry (:data:`ROW_FORMATS`) also render them
-file by file: ``file_rows(columns, metrics)`` a file's whole rows from its
-entry and metric columns at once, or in parts, where the metrics come later:
-``row_texts(columns)`` gives each row's text before and after its metrics,
-``metric_texts(metrics, statuses)`` that of its metrics, and
-``rows(leading, metrics, trailing)`` whole rows; ``join(texts)`` gives the
-rows of several files as one text (see :meth:`lensaudit.pipeline.Audit.rows`).
+The row formats (CSV, JSON) render every row at once, column by column: each
+column's values become texts in one pass (:mod:`lensaudit.columns`), and the
+rows are the columns interleaved with the literals between them
+(:func:`interleaved`).
 """
 
 from __future__ import annotations
@@ -14,10 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from importlib import import_module
 from itertools import chain
-from types import ModuleType
 
-from ..columns import LEADING_COLUMNS, METRIC_COLUMNS, TRAILING_COLUMNS
-from ..loader import STATUS_OK
+from ..columns import METRIC_COLUMNS
+from ..read.records import STATUS_OK
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -28,30 +25,11 @@ if TYPE_CHECKING:
 
 #: Format name -> module under lensaudit.formats.
 FORMATS = {"table": "table", "csv": "csv_format", "json": "json_format"}
-#: Formats whose rows are rendered per file, ahead of time, and cached.
-ROW_FORMATS = ("csv", "json")
 
 
 def writer(name: str) -> Callable[[Audit, TextIO], None]:
     """The ``write(audit, stream)`` function of the named format."""
     return import_module(f"{__name__}.{FORMATS[name]}").write
-
-
-def split_rows(
-    columns: dict[str, list],
-    fields: Callable[[str, list], list[str]],
-    leading: Callable[[tuple[str, ...]], str],
-    trailing: Callable[[tuple[str, ...]], str],
-) -> tuple[list[str], list[str]]:
-    """Each row's text before its metrics and after them, for ``row_texts``:
-    ``fields(name, values)`` renders a column, ``leading`` and ``trailing``
-    join a row's fields of :data:`~lensaudit.columns.LEADING_COLUMNS` and
-    ``TRAILING_COLUMNS``."""
-    before = [fields(name, columns[name]) for name in LEADING_COLUMNS]
-    after = [fields(name, columns[name]) for name in TRAILING_COLUMNS]
-    return list(map(leading, zip(*before, strict=True))), list(
-        map(trailing, zip(*after, strict=True))
-    )
 
 
 def interleaved(literals: list[str], fields: list[list[str]]) -> str:
@@ -97,10 +75,3 @@ def metric_fields(
         else:
             fields.append(floats(values))
     return fields
-
-
-def row_format(name: str) -> ModuleType:
-    """The module of a format in :data:`ROW_FORMATS`."""
-    if name not in ROW_FORMATS:
-        raise ValueError(f"{name!r} is not one of {', '.join(ROW_FORMATS)}")
-    return import_module(f"{__name__}.{FORMATS[name]}")

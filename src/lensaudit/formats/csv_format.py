@@ -4,12 +4,7 @@ Floats are written in shortest round-trip form, ``inf`` for infinite values
 and empty for values that do not apply; booleans as ``true``/``false``. Text
 is quoted as RFC 4180 says (only where it holds a comma, quote or line break).
 
-Rows are rendered file by file: the text an entry gives (:func:`row_texts`,
-which needs no metrics, so that it can be done while files are still being
-parsed), joined with the text of its metrics (:func:`metric_texts`) into
-whole rows (:func:`rows`). The audit keeps each file's rows, and the parse
-cache stores them, so that an unchanged database is written by
-concatenation.
+Every row is rendered at once, column by column (:func:`rows`).
 """
 
 from __future__ import annotations
@@ -24,7 +19,7 @@ from ..columns import (
     TRAILING_COLUMNS,
     format_floats,
 )
-from . import interleaved, metric_fields, split_rows
+from . import interleaved, metric_fields
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -58,45 +53,19 @@ def _fields(name: str, values: list) -> list[str]:
     return text_column(values)
 
 
-def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
-    """Each row's text before its metrics and after them, from the entry columns
-    (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
-    return split_rows(columns, _fields, ",".join, ",".join)
-
-
-def file_rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
-    """Whole rows, as :func:`rows` gives them, from the entry columns and the
-    metric columns of the same entries."""
+def rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
+    """Whole rows, each ending in a line break, from the entry columns (with
+    ``file``) and the metric columns of the same entries."""
     fields = [_fields(name, columns[name]) for name in LEADING_COLUMNS]
-    fields += _metric_fields(metrics, columns["status"])
+    fields += metric_fields(metrics, columns["status"], format_floats, TAIL_NAMES, _BOOLEAN, "")
     fields += [_fields(name, columns[name]) for name in TRAILING_COLUMNS]
     return interleaved(["", *[","] * (len(fields) - 1), "\n"], fields)
 
 
-def _metric_fields(metrics: dict[str, list], statuses: list[str]) -> list[list[str]]:
-    return metric_fields(metrics, statuses, format_floats, TAIL_NAMES, _BOOLEAN, "")
-
-
-def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
-    """Each entry's metric fields, from the metric columns and the statuses (an
-    entry that was not audited has no ``folds_in_image``)."""
-    return list(map(",".join, zip(*_metric_fields(metrics, statuses), strict=True)))
-
-
-def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:
-    """Whole rows, each ending in a line break, from :func:`row_texts` and
-    :func:`metric_texts` of the same entries."""
-    if not leading:
-        return ""
-    return "\n".join(map(",".join, zip(leading, metrics, trailing, strict=True))) + "\n"
-
-
-def join(texts: list[str]) -> str:
-    """The rows of several files as one text."""
-    return "".join(texts)
-
-
 def write(audit: Audit, stream: TextIO) -> None:
     stream.write(HEADER)
-    for text in audit.rows("csv"):
-        stream.write(text)
+    stream.write(rows(_entry_columns(audit), audit.metric_columns()))
+
+
+def _entry_columns(audit: Audit) -> dict[str, list]:
+    return {name: audit.entry_column(name) for name in (*LEADING_COLUMNS, *TRAILING_COLUMNS)}

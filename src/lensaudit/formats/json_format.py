@@ -7,11 +7,7 @@ The document is laid out as ``json.dump(document(audit), stream, indent=1)``
 lays it out, except that each entry is one line, as ``json.dumps(entry,
 separators=(", ", ": "))`` writes it: grep and diff show an entry whole, and
 the text is an eighth shorter than with a line per key. The entries are
-rendered column by column and file by file, as the CSV rows are (see
-:mod:`lensaudit.formats.csv_format`): per entry, the text before and after
-its metrics (:func:`row_texts`) and that of its metrics (:func:`metric_texts`),
-joined into whole entries (:func:`rows`), which the audit keeps and the parse
-cache stores.
+rendered all at once, column by column, as the CSV rows are (:func:`rows`).
 """
 
 from __future__ import annotations
@@ -30,7 +26,7 @@ from ..columns import (
     TRAILING_COLUMNS,
     float_texts,
 )
-from . import interleaved, metric_fields, split_rows
+from . import interleaved, metric_fields
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -91,44 +87,19 @@ _METRICS = _template(METRIC_COLUMNS, first=False, last=False)
 _TRAILING = _template(TRAILING_COLUMNS, first=False, last=True)
 
 
-def row_texts(columns: dict[str, list]) -> tuple[list[str], list[str]]:
-    """Each entry's text before its metrics and after them, from the entry columns
-    (:data:`~lensaudit.columns.LEADING_COLUMNS` and ``TRAILING_COLUMNS``)."""
-    return split_rows(columns, _values, _LEADING.__mod__, _TRAILING.__mod__)
-
-
-def _metric_fields(metrics: dict[str, list], statuses: list[str]) -> list[list[str]]:
-    return metric_fields(metrics, statuses, _floats, _TAILS, _BOOLEAN, "null")
-
-
-def metric_texts(metrics: dict[str, list], statuses: list[str]) -> list[str]:
-    """Each entry's metric items, from the metric columns and the statuses (an
-    entry that was not audited has no ``folds_in_image``)."""
-    return list(map(_METRICS.__mod__, zip(*_metric_fields(metrics, statuses), strict=True)))
-
-
-#: The text of an entry around its values, with ",\n" after it (see :func:`file_rows`).
+#: The text of an entry around its values, with ",\n" after it (see :func:`rows`).
 _LITERALS = (_LEADING + _METRICS + _TRAILING + ",\n").split("%s")
 
 
-def file_rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
-    """Whole entries, as :func:`rows` gives them, from the entry columns and the
-    metric columns of the same entries."""
+def rows(columns: dict[str, list], metrics: dict[str, list]) -> str:
+    """Whole entries, separated by ",\\n", from the entry columns (with
+    ``file``) and the metric columns of the same entries."""
+    if not columns["status"]:
+        return ""
     fields = [_values(name, columns[name]) for name in LEADING_COLUMNS]
-    fields += _metric_fields(metrics, columns["status"])
+    fields += metric_fields(metrics, columns["status"], _floats, _TAILS, _BOOLEAN, "null")
     fields += [_values(name, columns[name]) for name in TRAILING_COLUMNS]
     return interleaved(_LITERALS, fields)[:-2]  # no ",\n" after the last
-
-
-def rows(leading: list[str], metrics: list[str], trailing: list[str]) -> str:
-    """Whole entries, separated by ",\\n", from :func:`row_texts` and
-    :func:`metric_texts` of the same entries."""
-    return ",\n".join(map("".join, zip(leading, metrics, trailing, strict=True)))
-
-
-def join(texts: list[str]) -> str:
-    """The entries of several files as one text."""
-    return ",\n".join(text for text in texts if text)
 
 
 def _head(audit: Audit) -> dict[str, Any]:
@@ -157,14 +128,12 @@ def document(audit: Audit) -> dict[str, Any]:
 def write(audit: Audit, stream: TextIO) -> None:
     head = json.dumps({**_head(audit), "entries": []}, indent=1, allow_nan=False)
     assert head.endswith(_ENTRIES_END)
-    texts = [text for text in audit.rows("json") if text]
-    if not texts:
+    columns = {name: audit.entry_column(name) for name in (*LEADING_COLUMNS, *TRAILING_COLUMNS)}
+    text = rows(columns, audit.metric_columns())
+    if not text:
         stream.write(head + "\n")
         return
-    # As json.dump lays out a list that is not empty; each file's text written as is.
+    # As json.dump lays out a list that is not empty.
     stream.write(head[: -len("[]\n}")] + "[\n")
-    for number, text in enumerate(texts):
-        if number:
-            stream.write(",\n")
-        stream.write(text)
+    stream.write(text)
     stream.write("\n ]\n}\n")

@@ -1,58 +1,5 @@
-"""The smallest positive root at which 1 + a w + b w^2 + c w^3 changes sign.
-
-Every distortion model here reduces r_max to that root (see
-:mod:`lensaudit.normalizer`). The paper's Algorithm 1 computes it with the
-cubic formula alone; in floating point that loses the root when c is tiny
-next to a and b, when roots cluster, and it counts a double (tangent) root,
-where the polynomial touches zero without crossing, as a fold.
-
-For p(w) = 1 + a w + b w^2 + c w^3 with any finite binary64 coefficients,
-:func:`min_positive_root` takes one of three paths per element, each
-answer proven before it is returned:
-
-1. Fast path. Scale w by a power of two 2^t chosen per element, each
-   coefficient by its own power (a 2^t, b 2^2t, c 2^3t: exact, and no scale
-   factor that could overflow), so that the coefficients are at most 1 in
-   size. Work with the reversed, monic cubic q(x) = x^3 + A x^2 + B x + C,
-   x = 2^t / w: the first sign change of p is the largest x > 0 below which q
-   is negative. Bracket it between the critical points of q, decide the sign
-   at the local minimum with compensated (error-free) arithmetic or the
-   exact discriminant, and polish with Newton steps. The answer is accepted
-   only where no scaled coefficient came near underflow and a certificate
-   holds: q < 0 at x (1 - 2^-44), while at x (1 + 2^-44) q and q' are
-   positive and q' cannot vanish further out (q'' > 0 there, or q' has no
-   real root), each sign beyond its rounding-error bound. Then q is positive
-   and increasing beyond, and the sign change is within 2^-44 of x.
-2. Everything else is first decided exactly. Since p(0) = 1, a sign change on
-   (0, inf) exists exactly when c < 0; or when c > 0, some coefficient is
-   negative and the discriminant is positive (three real roots, so Descartes'
-   rule of signs counts the positive ones exactly); or for lower degrees, by
-   the same reasoning on the quadratic and linear cases. With a repeated
-   root (zero discriminant), p crosses exactly when c < 0. The discriminant's sign is
-   computed from the coefficients' mantissas and exponents, so that no term
-   overflows or underflows, with a rounding-error bound; where the bound
-   cannot tell, it is computed exactly in integers. The same signs tell which
-   root is wanted (the first of one, two or three positive roots), and so
-   give an exact test "is the root at most X" from the signs of p, p' and
-   p'' at X, each evaluated at X's own scale (scaled so that the largest
-   term is about 1) with a rounding-error bound. Estimates of the root (the
-   fast path with its negligible coefficients dropped, and the roots of
-   a + b w + c w^2, which p approaches for w far beyond the fast path's
-   scale), polished by Newton's method at their own scale, are accepted
-   where the test proves the root within 64 doubles of them; otherwise
-   bisection over the bit patterns of positive doubles with the test
-   brackets the root between two adjacent doubles.
-3. Where a sign in step 2 is too close to call even with compensated
-   arithmetic (tangencies and near-triple roots), or the discriminant is
-   exactly zero, the same test runs in exact integer arithmetic on the
-   binary64 inputs, and the result is rounded correctly.
-
-Accuracy: the finite/infinite decision is exact for all finite binary64
-inputs; the relative error is at most 2^-43 (about 1.1e-13) wherever the root
-is a normal double (usually a unit or so in the last place). ``inf`` means
-no sign change up to the largest double. A subnormal root comes back finite
-and positive.
-"""
+"""The solver's array code: :func:`min_positive_root` over numpy arrays (see
+:mod:`lensaudit.solver` for how it proves its answers)."""
 
 from __future__ import annotations
 
@@ -62,6 +9,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from .constants import ABSENT as _ABSENT
+from .constants import EPS as _EPS
+from .constants import HALF_WIDTH as _HALF_WIDTH
+from .constants import MAX as _MAX
+from .constants import PLAIN_NEWTON_STEPS as _PLAIN_NEWTON_STEPS
+from .constants import SAFE_SCALED as _SAFE_SCALED
+from .constants import SMALLEST_NORMAL as _SMALLEST_NORMAL
+from .constants import SPLITTER as _SPLITTER
+from .constants import WELL_CONDITIONED as _WELL_CONDITIONED
 
 # Exact arithmetic is imported where it is needed: few inputs ever take that path.
 if TYPE_CHECKING:
@@ -73,13 +30,7 @@ _Frexps = tuple[
     FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32], FloatArray, NDArray[np.int32]
 ]
 
-_EPS = np.finfo(np.float64).eps
-_SPLITTER = 134217729.0  # 2**27 + 1, for Veltkamp's split
 _NEWTON_ROUNDS = 80
-_PLAIN_NEWTON_STEPS = 5
-# Roots whose condition number (sum of |terms| over |x q'(x)|) is below this
-# are accurate to 1e-13 after plain Newton steps; others are polished.
-_WELL_CONDITIONED = 1e3
 _CHUNK = 1 << 15  # elements per pass: keeps numpy's temporaries in cache
 
 
@@ -312,20 +263,10 @@ def _polish(
 
 # -- the fast path: certificate ------------------------------------------------------
 
-#: Scaled coefficients at least this large (or exactly zero) keep every
-#: intermediate of the fast path, errors of compensated products included,
-#: far from underflow.
-_SAFE_SCALED = 2.0**-250
-#: Half-width, relative, of the interval in which the fast path proves its root.
-_HALF_WIDTH = 2.0**-44
-_MAX = float(np.finfo(np.float64).max)
 _MAX_BITS = 0x7FEFFFFFFFFFFFFF  # bit pattern of _MAX
-_SMALLEST_NORMAL = 2.0**-1022
 #: Absolute allowance for underflow in evaluations scaled so that the largest
 #: term is at least 1/16: every rounding below the normal range costs < 2^-1074.
 _UNDERFLOW_SLOP = 2.0**-1060
-#: Exponent given to a missing (zero) term, so that it is never the largest.
-_ABSENT = -(1 << 20)
 
 
 def _reliably(value: FloatArray, bound: FloatArray) -> NDArray[np.int8]:

@@ -22,23 +22,21 @@ from __future__ import annotations
 
 import math
 
-from .columns import METRIC_COLUMNS
+from ..columns import METRIC_COLUMNS
+from .constants import ABSENT as _ABSENT
+from .constants import EPS as _EPS
+from .constants import HALF_DIAGONAL_MM
+from .constants import HALF_WIDTH as _HALF_WIDTH
+from .constants import MAX as _MAX
+from .constants import PLAIN_NEWTON_STEPS as _PLAIN_NEWTON_STEPS
+from .constants import SAFE_SCALED as _SAFE_SCALED
+from .constants import SMALLEST_NORMAL as _SMALLEST_NORMAL
+from .constants import SPLITTER as _SPLITTER
+from .constants import WELL_CONDITIONED as _WELL_CONDITIONED
 
-_EPS = 2.0**-52
-_MAX = 1.7976931348623157e308
-_SMALLEST_NORMAL = 2.0**-1022
-_SAFE_SCALED = 2.0**-250
-_HALF_WIDTH = 2.0**-44
 _TINY_ROOT = 2.0**-300
-_SPLITTER = 134217729.0  # 2**27 + 1, for Veltkamp's split
-_PLAIN_NEWTON_STEPS = 5
-_WELL_CONDITIONED = 1e3
 _INF = math.inf
 _NAN = math.nan
-_ABSENT = -(1 << 20)  # an exponent below every double's
-
-#: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
-HALF_DIAGONAL_MM = math.hypot(18.0, 12.0)
 
 #: Metrics of one entry, in the order of :data:`lensaudit.columns.METRIC_COLUMNS`:
 #: r_max, d_max, tail, r_corner, r_normalized, r_corner_paper,

@@ -1,0 +1,247 @@
+"""The reader: every command reads a Lensfun database through this package, once.
+
+:func:`read` resolves the paths (the default database without them), reads
+each file's bytes, parses each file once with the one safe parser
+(:mod:`~lensaudit.read.xml`) and returns plain tables
+(:class:`~lensaudit.read.records.FileTables`): the file's status, its lenses,
+and its distortion, vignetting and TCA rows with their lines and lens
+context (:mod:`~lensaudit.read.tables`). With a cache
+(:class:`~lensaudit.read.cache.Cache`), a file whose bytes were read before
+is not parsed again. :func:`read_bytes` reads one file's content from
+anywhere (a git revision, a test).
+
+Nothing else in lensaudit touches XML.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from functools import partial
+from pathlib import Path
+
+from . import parallel, paths, xml
+from .cache import Cache, content_digest
+from .paths import DatabaseSource, Paths, display_path, expand, resolve
+from .records import (
+    STATUS_OK,
+    STATUS_UNREADABLE,
+    DistortionEntry,
+    FileTables,
+    LoadError,
+    SourceFile,
+)
+from .tables import KINDS, SPECS, TCA, VIGNETTING, error_row, file_tables
+
+__all__ = [
+    "KINDS",
+    "TCA",
+    "VIGNETTING",
+    "Cache",
+    "Database",
+    "DatabaseSource",
+    "DistortionEntry",
+    "FileTables",
+    "LoadError",
+    "SourceFile",
+    "display_path",
+    "read",
+    "read_bytes",
+    "read_contents",
+    "read_files",
+    "resolve",
+]
+
+
+class Database:
+    """What :func:`read` found: the database ``source`` and its ``files``
+    (:class:`FileTables`, in order)."""
+
+    __slots__ = ("source", "files")
+
+    def __init__(self, source: DatabaseSource, files: list[FileTables]) -> None:
+        self.source = source
+        self.files = files
+
+    def entries(self) -> list[DistortionEntry]:
+        """Every distortion row, as :class:`DistortionEntry` records, in order."""
+        return [entry for file in self.files for entry in file.entries()]
+
+    def source_files(self) -> list[SourceFile]:
+        """The files as :class:`SourceFile` records."""
+        return [file.source_file() for file in self.files]
+
+    def rows(self, kind: str) -> tuple[list[str], list[tuple]]:
+        """(file name of each row, rows) of ``vignetting`` or ``tca``, in order;
+        the database must have been read with its calibrations."""
+        names: list[str] = []
+        rows: list[tuple] = []
+        for file in self.files:
+            found = file.vignetting if kind == VIGNETTING else file.tca
+            assert found is not None, "read with calibrations=True"
+            names += [file.name] * len(found)
+            rows += found
+        return names, rows
+
+
+def read(
+    paths_given: Paths = None, *, cache: Cache | None = None, calibrations: bool = False
+) -> Database:
+    """Read a Lensfun database: directories and/or XML files, where a Lensfun
+    checkout means its ``data/db``; without paths, the checkout around the
+    working directory, else the database bundled with lensfunpy.
+
+    With ``calibrations``, vignetting and TCA rows are read too. Raises
+    :class:`LoadError` when the paths cannot be read at all; problems inside
+    files are statuses in their tables instead.
+    """
+    source = resolve(paths_given)
+    return Database(source, read_files(expand(source.paths), cache, calibrations))
+
+
+def read_files(
+    targets: Iterable[tuple[Path, str]], cache: Cache | None = None, calibrations: bool = False
+) -> list[FileTables]:
+    """The tables of (path, display name) pairs, as :func:`expand` gives them;
+    a file that cannot be read is a table of status ``unreadable``."""
+    found: list[FileTables | tuple[bytes, str, Path]] = []
+    for path, name in targets:
+        try:
+            found.append((paths.read_file(path), name, path))
+        except OSError as error:
+            found.append(unreadable(name, path, f"cannot read file: {paths.reason(error)}"))
+    contents = [item for item in found if isinstance(item, tuple)]
+    made = iter(read_contents(contents, cache, calibrations))
+    return [item if isinstance(item, FileTables) else next(made) for item in found]
+
+
+def read_contents(
+    contents: Sequence[tuple[bytes, str, Path | None]],
+    cache: Cache | None = None,
+    calibrations: bool = False,
+) -> list[FileTables]:
+    """The tables of files' contents, given as (bytes, display name, path or
+    None). Contents the cache does not know are parsed on every core
+    (:func:`~lensaudit.read.parallel.map_sized`); with a cache, what is read
+    is kept there and the cache saved."""
+    found = [_cached(data, name, path, cache, calibrations) for data, name, path in contents]
+    todo = [item for item, tables in zip(contents, found, strict=True) if tables is None]
+    if todo:
+        parse = partial(_parsed_values, calibrations=calibrations)
+        values = parallel.map_sized(
+            parse, [data for data, _, _ in todo], [len(d) for d, _, _ in todo]
+        )
+        made = iter(_made(todo, values, cache, calibrations))
+        found = [tables if tables is not None else next(made) for tables in found]
+    if cache is not None:
+        cache.save()
+    return found  # type: ignore[return-value]
+
+
+def read_bytes(
+    data: bytes,
+    name: str,
+    path: Path | None = None,
+    *,
+    cache: Cache | None = None,
+    calibrations: bool = False,
+) -> FileTables:
+    """The tables of one file's content; ``name`` is how it is shown, ``path``
+    where it is (None for a file read from git or memory). With ``cache``,
+    what it holds for the same bytes is used, and what is read is kept (the
+    caller saves the cache)."""
+    tables = _cached(data, name, path, cache, calibrations)
+    if tables is None:
+        values = _parsed_values(data, calibrations)
+        tables = _made([(data, name, path)], [values], cache, calibrations)[0]
+    return tables
+
+
+def _cached(
+    data: bytes, name: str, path: Path | None, cache: Cache | None, calibrations: bool
+) -> FileTables | None:
+    """The tables the cache holds for these bytes, or None."""
+    if cache is None:
+        return None
+    digest = content_digest(data)
+    stored = cache.get(digest, "tables")
+    stored_calibrations = cache.get(digest, "calibrations") if calibrations else None
+    if stored is None or (calibrations and stored_calibrations is None):
+        return None
+    try:
+        tables = FileTables(name, path, digest, stored)  # type: ignore[arg-type]
+        if calibrations:
+            tables.vignetting, tables.tca = stored_calibrations  # type: ignore[misc]
+    except (TypeError, ValueError):
+        return None  # not what this code stores: parsed again
+    return tables
+
+
+def _made(
+    todo: list[tuple[bytes, str, Path | None]],
+    values: list[tuple],
+    cache: Cache | None,
+    calibrations: bool,
+) -> list[FileTables]:
+    """Tables of files parsed (``values``, as :func:`_parsed_values` gives them),
+    kept in the cache."""
+    made = []
+    for (data, name, path), (stored, calibration_rows) in zip(todo, values, strict=True):
+        digest = content_digest(data)
+        tables = FileTables(name, path, digest, stored)
+        if calibrations:
+            tables.vignetting, tables.tca = calibration_rows
+        if cache is not None:
+            cache.put(digest, "tables", stored)
+            if calibrations:
+                cache.put(digest, "calibrations", calibration_rows)
+        made.append(tables)
+    return made
+
+
+def _parsed_values(data: bytes, calibrations: bool) -> tuple:
+    """Parse one file's content: (its :attr:`FileTables.STORED` values, its
+    (vignetting, tca) rows or None), as plain data."""
+    parsed = xml.parse(data)
+    if parsed.root is None:
+        lenses, distortion, lens_of_row, omitted = [], [], [], []
+        vignetting: list | None = [] if calibrations else None
+        tca: list | None = [] if calibrations else None
+    else:
+        lenses, distortion, lens_of_row, omitted, vignetting, tca = file_tables(
+            parsed.root, calibrations
+        )
+    if parsed.status != STATUS_OK:
+        status, line, error, message = (
+            parsed.status,
+            parsed.line,
+            parsed.error,
+            parsed.entry_message,
+        )
+        distortion = [error_row(line, status, error), *_marked(distortion, status, message)]
+        lens_of_row = [None, *lens_of_row]
+        omitted = [(), *omitted]
+        if vignetting is not None and tca is not None:
+            vignetting = [SPECS[VIGNETTING].error_row(line, status, error),
+                          *_marked(vignetting, status, message)]  # fmt: skip
+            tca = [SPECS[TCA].error_row(line, status, error), *_marked(tca, status, message)]
+    stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
+              lenses, distortion, lens_of_row, omitted)  # fmt: skip
+    return stored, (vignetting, tca) if calibrations else None
+
+
+def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
+    """Rows given a file-level status; for a file that is not well-formed, each
+    row's own problems kept in front of ``message``."""
+    if status == xml.STATUS_XML_ERROR:
+        return [(*r[:-2], status, f"{r[-1]}; {message}" if r[-1] else message) for r in rows]
+    return [(*r[:-2], status, message) for r in rows]
+
+
+def unreadable(name: str, path: Path | None, message: str) -> FileTables:
+    """The tables of a file that could not be read: one row that says why."""
+    values = (STATUS_UNREADABLE, 0, 0, message, message, [],
+              [error_row(0, STATUS_UNREADABLE, message)], [None], [()])  # fmt: skip
+    tables = FileTables(name, path, b"", values)
+    tables.vignetting = [SPECS[VIGNETTING].error_row(0, STATUS_UNREADABLE, message)]
+    tables.tca = [SPECS[TCA].error_row(0, STATUS_UNREADABLE, message)]
+    return tables

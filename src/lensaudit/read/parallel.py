@@ -1,0 +1,116 @@
+"""Parse files on every core: the reader's one speed mechanism.
+
+:func:`map_sized` applies a function to a list of items, split into one
+share per CPU by size (largest first, each to the lightest share). Where it
+is safe and pays (``os.fork`` exists, this process runs one thread, more
+than one CPU is available and there is enough to do), each share but the
+first goes to a forked process, which sends its results back through a pipe
+as :mod:`marshal` data (so results must be plain data); the first is done
+here meanwhile. A share whose process fails is done here afterwards, where
+any error then shows itself.
+"""
+
+from __future__ import annotations
+
+import marshal
+import os
+import threading
+from collections.abc import Callable, Sequence
+
+# typing only for type checkers
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any
+
+#: Below this many bytes in all, a process costs more than it saves.
+MIN_BYTES = 256 * 1024
+#: Processes at most, whatever the number of CPUs.
+MAX_PROCESSES = 8
+
+
+def cpus() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def shares(sizes: Sequence[int], count: int) -> list[list[int]]:
+    """Indices of ``sizes`` split into ``count`` shares of about equal total."""
+    found: list[list[int]] = [[] for _ in range(count)]
+    totals = [0] * count
+    for index in sorted(range(len(sizes)), key=sizes.__getitem__, reverse=True):
+        lightest = totals.index(min(totals))
+        found[lightest].append(index)
+        totals[lightest] += sizes[index]
+    return [sorted(share) for share in found if share]
+
+
+def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Sequence[int]) -> list:
+    """``[function(item) for item in items]``, spread over the CPUs by ``sizes``."""
+    count = min(cpus(), MAX_PROCESSES, len(items))
+    if (
+        count < 2
+        or sum(sizes) < MIN_BYTES
+        or not hasattr(os, "fork")
+        or threading.active_count() > 1  # forking a threaded process can deadlock the child
+    ):
+        return [function(item) for item in items]
+    first, *others = shares(sizes, count)
+    results: dict[int, Any] = {}
+    children: list[tuple[int, int]] = []
+    try:
+        for share in others:
+            children.append(_fork(function, items, share))
+        for index in first:
+            results[index] = function(items[index])
+        while children:
+            pid, output = children[0]
+            results.update(_collect(pid, output))
+            children.pop(0)
+    finally:
+        for pid, output in children:  # after an error here: no child outlives it
+            _stop(pid, output)
+    return [results[i] if i in results else function(items[i]) for i in range(len(items))]
+
+
+def _fork(function: Callable[[Any], Any], items: Sequence[Any], share: list[int]) -> tuple:
+    output, output_input = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: do its share, send it, leave without the parent's cleanup
+        code = 1
+        try:
+            os.close(output)
+            data = marshal.dumps([(index, function(items[index])) for index in share])
+            with open(output_input, "wb", closefd=True) as stream:
+                stream.write(data)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(output_input)
+    return pid, output
+
+
+def _collect(pid: int, output: int) -> dict[int, Any]:
+    """What a child sent: index -> result; empty if it failed. Closes ``output``
+    and waits for the child."""
+    with open(output, "rb", closefd=True) as stream:
+        data = stream.read()
+    _, status = os.waitpid(pid, 0)
+    if status != 0:
+        return {}
+    try:
+        return dict(marshal.loads(data))
+    except (EOFError, ValueError, TypeError):
+        return {}
+
+
+def _stop(pid: int, output: int) -> None:
+    """End a child whose results are no longer wanted."""
+    try:
+        os.close(output)
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+    except OSError:
+        pass

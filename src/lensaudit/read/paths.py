@@ -1,0 +1,316 @@
+"""Which files a database is: the default database, directories, display names, bytes.
+
+Without paths, a command reads the database of the Lensfun checkout the
+working directory is in, else the copy of the Lensfun database that ships
+with lensfunpy (``lensfunpy/db_files``), located without importing
+lensfunpy, so that finding it does not load liblensfun.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+import sys
+from collections import namedtuple
+from collections.abc import Iterable, Sequence
+from importlib.util import find_spec
+from pathlib import Path
+
+from .records import LoadError
+
+#: Larger files are not read: Lensfun's largest database file is about 2 MB.
+MAX_FILE_BYTES = 256 << 20
+#: Where a Lensfun checkout keeps its database, relative to the checkout.
+CHECKOUT_DATABASE = Path("data", "db")
+#: How every command's help names the database it reads without paths.
+DEFAULT_DATABASE_HELP = (
+    "without PATH, the database of the Lensfun checkout around the working "
+    "directory, else the one bundled with lensfunpy"
+)
+
+Paths = Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None
+
+
+class DatabaseSource(
+    namedtuple("DatabaseSource", ("paths", "label", "bundled"), defaults=(False,))
+):
+    """What was read: the ``paths`` (a tuple), a human-readable ``label``, and
+    whether it is the database ``bundled`` with lensfunpy."""
+
+    __slots__ = ()
+
+
+def display_path(path: str | os.PathLike[str]) -> str:
+    """A path as printed: bytes that are not valid in the file system's
+    encoding (a file name that is not UTF-8) as backslash escapes."""
+    return os.fsencode(path).decode(sys.getfilesystemencoding(), "backslashreplace")
+
+
+def bundled_database_path() -> Path:
+    """Directory of the Lensfun database installed with lensfunpy."""
+    spec = find_spec("lensfunpy")
+    if spec is None or not spec.submodule_search_locations:
+        raise LoadError(
+            "lensfunpy is not installed: give a database path, "
+            "or install it with `pip install lensfunpy`"
+        )
+    path = Path(next(iter(spec.submodule_search_locations))) / "db_files"
+    if not path.is_dir():
+        raise LoadError(f"lensfunpy is installed but has no database at {path}")
+    return path
+
+
+def lensfunpy_version() -> str:
+    """Installed lensfunpy version, or "" when it is not installed.
+
+    Read from lensfunpy's ``_version.py`` when it has one: importing
+    importlib.metadata costs more than the rest of finding the database.
+    """
+    spec = find_spec("lensfunpy")
+    if spec is None or not spec.submodule_search_locations:
+        return ""
+    version_file = Path(next(iter(spec.submodule_search_locations))) / "_version.py"
+    try:
+        match = re.search(r"""__version__\s*=\s*["']([^"']+)["']""", version_file.read_text())
+    except OSError:
+        match = None
+    if match:
+        return match.group(1)
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lensfunpy")
+    except PackageNotFoundError:
+        return ""
+
+
+def resolve(paths: Paths) -> DatabaseSource:
+    """The database to read.
+
+    ``paths`` if given, where a Lensfun checkout (or its ``data`` directory)
+    stands for its ``data/db``; without paths, the database of the Lensfun
+    checkout the working directory is in, else lensfunpy's bundled one.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    if paths:
+        given = _unique(Path(p) for p in paths)
+        resolved = tuple(database_directory(p) for p in given)
+        return DatabaseSource(resolved, ", ".join(map(_describe, given, resolved)))
+    here = enclosing_database()
+    if here is not None:
+        label = _describe(here, here, "the Lensfun checkout around the working directory")
+        return DatabaseSource((here,), label)
+    path = bundled_database_path()
+    return DatabaseSource(
+        (path,),
+        f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
+        bundled=True,
+    )
+
+
+def _unique(paths: Iterable[Path]) -> tuple[Path, ...]:
+    """Paths without repeats: a database named twice is read once."""
+    seen: dict[str, Path] = {}
+    for path in paths:
+        seen.setdefault(os.path.realpath(path), path)
+    return tuple(seen.values())
+
+
+def is_database_directory(path: Path) -> bool:
+    """Whether ``path`` is a directory holding Lensfun database files: one of
+    its first few ``*.xml`` files names ``<lensdatabase`` in its first kilobyte."""
+    try:
+        candidates = sorted(p for p in os.listdir(path) if p.lower().endswith(".xml"))[:3]
+    except OSError:
+        return False
+    for name in candidates:
+        try:
+            with open(read_descriptor(path / name), "rb") as stream:
+                if b"<lensdatabase" in stream.read(1024):
+                    return True
+        except OSError:
+            continue
+    return False
+
+
+def database_directory(path: Path) -> Path:
+    """The database a path designates: ``data/db`` of a Lensfun checkout (or of
+    its ``data`` directory), else ``path`` itself."""
+    for candidate in (path / CHECKOUT_DATABASE, path / CHECKOUT_DATABASE.name):
+        if is_database_directory(candidate):
+            return candidate
+    return path
+
+
+def enclosing_database(start: Path | None = None) -> Path | None:
+    """``data/db`` of the Lensfun checkout that ``start`` (the working directory)
+    is in, looking at it and its parents; None outside a Lensfun checkout."""
+    try:
+        start = (start or Path.cwd()).resolve()
+    except OSError:  # the working directory was removed
+        return None
+    for directory in (start, *start.parents):
+        if directory.parts[-2:] == CHECKOUT_DATABASE.parts and is_database_directory(directory):
+            return directory
+        if is_database_directory(directory / CHECKOUT_DATABASE):
+            return directory / CHECKOUT_DATABASE
+    return None
+
+
+def git_commit(directory: Path) -> str:
+    """Short id of the commit checked out in the git repository holding
+    ``directory``, with ``+changes`` when the directory differs from it; ""
+    outside a git repository or without git."""
+    import subprocess
+
+    environment = {**os.environ, "GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
+    try:
+        commit = subprocess.run(
+            ["git", "-C", os.fspath(directory), "rev-parse", "--short=10", "HEAD"],
+            capture_output=True, env=environment, timeout=10, check=True,
+        ).stdout.decode("ascii").strip()  # fmt: skip
+        changed = subprocess.run(
+            ["git", "-C", os.fspath(directory), "status", "--porcelain", "--", "."],
+            capture_output=True, env=environment, timeout=30, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError, UnicodeDecodeError):
+        return ""
+    return commit + ("+changes" if changed else "")
+
+
+def _describe(given: Path, directory: Path, origin: str = "") -> str:
+    """How a database is named in output: the path, and where it comes from."""
+    if directory != given:
+        origin = f"Lensfun checkout: {display_path(directory)}"
+    text = display_path(given) + (f" ({origin})" if origin else "")
+    if directory.parts[-2:] == CHECKOUT_DATABASE.parts and directory.is_dir():
+        commit = git_commit(directory)
+        if commit:
+            text += f" at git commit {commit}"
+    return text
+
+
+def timestamp(directory: Path) -> str:
+    """Content of Lensfun's ``timestamp.txt`` in a database directory, or ""."""
+    try:
+        return (directory / "timestamp.txt").read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return ""
+
+
+def reason(error: OSError) -> str:
+    """An OS error in words."""
+    return error.strerror or str(error)
+
+
+def _xml_entries(path: Path) -> list[tuple[str, bool]]:
+    """(name, whether it is a symbolic link) of each ``*.xml`` entry directly
+    inside a directory, sorted by name: anything so named but a directory,
+    so that a FIFO, a device, a dangling link or a link loop named ``*.xml``
+    is reported as unreadable rather than silently skipped."""
+    found = []
+    with os.scandir(path) as entries:
+        for item in entries:
+            if not item.name.lower().endswith(".xml"):
+                continue
+            try:
+                directory = item.is_dir()
+            except OSError:  # a link loop: is_dir() gives up, stat() would raise
+                directory = False
+            if not directory:
+                found.append((item.name, item.is_symlink()))
+    return sorted(found)
+
+
+def xml_files(path: Path) -> list[Path]:
+    """The ``*.xml`` files directly inside a database directory, sorted by name.
+    Raises ``OSError`` when the directory cannot be listed."""
+    return [path / name for name, _ in _xml_entries(path)]
+
+
+def expand(paths: Paths) -> list[tuple[Path, str]]:
+    """(path, display name) of every XML file the paths designate.
+
+    Directory entries are named relative to the directory given; files given
+    directly keep the path as given. Paths are resolved where they can be: a
+    link that leads nowhere keeps its own path, to be reported when it is
+    read. Raises :class:`LoadError` when a path does not exist or a
+    directory holds no XML.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    targets: list[tuple[Path, str]] = []
+    seen: set[str] = set()
+    for given in map(Path, paths or ()):
+        for real, name in _files_of(given):
+            # The same file named twice (db and db/x.xml, or a link) is read once.
+            if real not in seen:
+                seen.add(real)
+                targets.append((Path(real), name))
+    return targets
+
+
+def _files_of(given: Path) -> list[tuple[str, str]]:
+    """(real path, display name) of the files one given path designates."""
+    shown = display_path(given)
+    try:
+        mode = os.stat(given).st_mode
+    except FileNotFoundError:
+        raise LoadError(f"{shown}: no such file or directory") from None
+    except OSError as error:
+        raise LoadError(f"{shown}: {reason(error)}") from None
+    if stat.S_ISREG(mode):
+        return [(os.path.realpath(given), shown)]
+    if not stat.S_ISDIR(mode):
+        raise LoadError(f"{shown}: not a regular file or directory")
+    try:
+        entries = _xml_entries(given)
+    except OSError as error:
+        raise LoadError(f"{shown}: cannot list directory: {reason(error)}") from None
+    if not entries:
+        raise LoadError(
+            f"{shown}: directory holds no *.xml files (give a Lensfun database "
+            "directory, a Lensfun checkout, or XML files)"
+        )
+    # The directory resolved once: a file in it that is not a link resolves to
+    # the directory's real path and its own name.
+    base = os.path.realpath(given)
+    return [
+        (_real(given / name) if link else os.path.join(base, name), display_path(name))
+        for name, link in entries
+    ]
+
+
+def _real(path: Path) -> str:
+    """The real path of a link, or, for a link loop or one leading nowhere,
+    its own absolute path (reading it then says what is wrong)."""
+    try:
+        return os.path.realpath(path, strict=True)
+    except (OSError, RuntimeError):
+        return os.path.abspath(path)
+
+
+def read_descriptor(path: str | os.PathLike[str]) -> int:
+    """A descriptor of ``path`` opened for reading without ever blocking (a FIFO
+    cannot hang the run); the caller closes it."""
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    return os.open(path, flags | getattr(os, "O_CLOEXEC", 0))
+
+
+def read_file(path: str | os.PathLike[str]) -> bytes:
+    """The bytes of a regular file.
+
+    Raises ``OSError`` for a FIFO, device, socket or directory (opened
+    non-blocking and refused), a link that leads nowhere or in a loop, and a
+    file larger than :data:`MAX_FILE_BYTES`.
+    """
+    descriptor = read_descriptor(path)
+    with open(descriptor, "rb", closefd=True) as stream:
+        info = os.fstat(descriptor)
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(0, "not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise OSError(0, f"larger than {MAX_FILE_BYTES >> 20} MiB, not a database file")
+        return stream.read()
