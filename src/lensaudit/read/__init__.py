@@ -30,7 +30,7 @@ from .records import (
     LoadError,
     SourceFile,
 )
-from .tables import KINDS, SPECS, TCA, VIGNETTING, error_row, file_tables
+from .tables import KINDS, READ, SPECS, TCA, VIGNETTING, FileReader, error_row
 
 __all__ = [
     "KINDS",
@@ -201,15 +201,9 @@ def _made(
 def _parsed_values(data: bytes, calibrations: bool) -> tuple:
     """Parse one file's content: (its :attr:`FileTables.STORED` values, its
     (vignetting, tca) rows or None), as plain data."""
-    parsed = xml.parse(data)
-    if parsed.root is None:
-        lenses, distortion, lens_of_row, omitted = [], [], [], []
-        vignetting: list | None = [] if calibrations else None
-        tca: list | None = [] if calibrations else None
-    else:
-        lenses, distortion, lens_of_row, omitted, vignetting, tca = file_tables(
-            parsed.root, calibrations
-        )
+    parsed, found = xml.parse(data, partial(FileReader, calibrations), READ)
+    distortion, lens_of_row, omitted = found.distortion, found.lens_of_row, found.omitted
+    vignetting, tca = found.vignetting, found.tca
     if parsed.status != STATUS_OK:
         status, line, error, message = (
             parsed.status,
@@ -225,7 +219,7 @@ def _parsed_values(data: bytes, calibrations: bool) -> tuple:
                           *_marked(vignetting, status, message)]  # fmt: skip
             tca = [SPECS[TCA].error_row(line, status, error), *_marked(tca, status, message)]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
-              lenses, distortion, lens_of_row, omitted)  # fmt: skip
+              found.lenses, distortion, lens_of_row, omitted)  # fmt: skip
     return stored, (vignetting, tca) if calibrations else None
 
 

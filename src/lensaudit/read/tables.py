@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from operator import itemgetter
+from typing import Any
 
 from .records import (
     DEFAULT_ASPECT_RATIO,
@@ -36,14 +37,14 @@ from .records import (
 # typing only for type checkers
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import Any
-
     from lxml import etree
 
 VIGNETTING = "vignetting"
 TCA = "tca"
 KINDS = (VIGNETTING, TCA)
 
+#: The function that gives an element's line (see :func:`lensaudit.read.xml.parse`).
+LineOf = Callable[[Any], int]
 #: When an entry has several problems, its status names the most basic one.
 STATUS_PRIORITY = (STATUS_NO_LENS, STATUS_MISSING_ATTRIBUTE, STATUS_UNKNOWN_MODEL, STATUS_BAD_VALUE)
 
@@ -95,7 +96,7 @@ _NO_LENS = LensContext(
 _NAMED = frozenset(("maker", "model", "type", "cropfactor", "aspect-ratio"))
 
 
-def read_lens(element: etree._Element, index: int) -> tuple[tuple, LensContext]:
+def read_lens(element: etree._Element, index: int, line: int) -> tuple[tuple, LensContext]:
     """A ``<lens>`` as a :class:`~lensaudit.read.records.Lens` row, and the
     context it gives its entries. Of each named child, the last without a
     ``lang`` attribute counts, as in liblensfun."""
@@ -134,7 +135,7 @@ def read_lens(element: etree._Element, index: int) -> tuple[tuple, LensContext]:
     lens_type = texts.get("type") or DEFAULT_LENS_TYPE
     fields = (maker, model, tuple(mounts), lens_type, crop_factor, aspect_ratio)
     problem = "; ".join(problems)
-    row = (element.sourceline or 0, maker, model, tuple(mounts), lens_type, crop_factor,
+    row = (line, maker, model, tuple(mounts), lens_type, crop_factor,
            aspect_ratio, crop_text, problem, tuple(content))  # fmt: skip
     return row, LensContext(fields, problem, index=index)
 
@@ -145,7 +146,9 @@ def _positive(value: float, what: str) -> float:
     return value
 
 
-def calibration_context(calibration: etree._Element | None, lens: LensContext) -> LensContext:
+def calibration_context(
+    calibration: etree._Element | None, lens: LensContext, line_of: LineOf
+) -> LensContext:
     """Apply what a ``<calibration>`` adds to its lens's context: ``cropfactor=``
     and ``aspect-ratio=``, and ``<real-focal-length>`` elements."""
     if calibration is None or calibration.tag != "calibration":
@@ -159,7 +162,7 @@ def calibration_context(calibration: etree._Element | None, lens: LensContext) -
             focal = parse_number(element.get("focal"))
             real_focals[focal] = _positive(parse_number(element.get("real-focal")), "real focal")
         except ValueError as error:
-            problems.append(f"<real-focal-length> on line {element.sourceline}: {error}")
+            problems.append(f"<real-focal-length> on line {line_of(element)}: {error}")
     if (
         crop_text is None
         and aspect_text is None
@@ -183,43 +186,44 @@ def calibration_context(calibration: etree._Element | None, lens: LensContext) -
 
 
 def elements_in_context(
-    root: etree._Element, tags: tuple[str, ...]
+    piece: etree._Element, tags: tuple[str, ...], first_lens: int, line_of: LineOf
 ) -> tuple[list[tuple], list[tuple[etree._Element, LensContext]]]:
-    """The file's lens rows, and each element under ``root`` named one of
-    ``tags``, in document order, with the context it is read in: its lens's
-    (the innermost, for a lens inside a lens), with its ``<calibration>``."""
+    """The lens rows of a piece of a document (its lenses numbered from
+    ``first_lens``), and each element in it named one of ``tags``, in
+    document order, with the context it is read in: its lens's (the
+    innermost, for a lens inside a lens), with its ``<calibration>``."""
     lenses: list[tuple] = []
     contexts: dict[Any, LensContext] = {}  # lens element -> its context
     found = []
     lens = calibration = None
-    context = _NO_LENS
-    for element in root.iter("lens", "calibration", *tags):
+    context = of_lens = _NO_LENS
+    for element in piece.iter("lens", "calibration", *tags):
         tag = element.tag
         if tag == "lens":
-            row, context = read_lens(element, len(lenses))
+            row, context = read_lens(element, first_lens + len(lenses), line_of(element))
             lenses.append(row)
             contexts[element] = context
             lens, calibration, of_lens = element, None, context
         elif tag == "calibration":
             if element.getparent() is lens:
                 calibration = element
-                context = calibration_context(calibration, of_lens)
+                context = calibration_context(calibration, of_lens, line_of)
         # calibration is only ever set to a child of the current lens.
         elif calibration is None or lens is None or element.getparent() is not calibration:
-            found.append((element, _context_of(element, contexts)))
+            found.append((element, _context_of(element, contexts, line_of)))
         else:
             found.append((element, context))
     return lenses, found
 
 
-def _context_of(element: etree._Element, contexts: dict) -> LensContext:
+def _context_of(element: etree._Element, contexts: dict, line_of: LineOf) -> LensContext:
     """The context of an element found outside ``<lens><calibration>`` (rare):
     that of the lens it is in, if any, with its parent's overrides if the
     parent is a ``<calibration>``."""
     lens = next(element.iterancestors("lens"), None)
     base = _NO_LENS if lens is None else contexts[lens]
     parent = element.getparent()
-    return calibration_context(parent, base) if parent is not None else base
+    return calibration_context(parent, base, line_of) if parent is not None else base
 
 
 def attribute_number(
@@ -308,7 +312,7 @@ _LAYOUT = {
 _MODEL_DEFAULTS = {model: dict.fromkeys(names, 0.0) for model, names in MODEL_COEFFICIENTS.items()}
 
 
-def distortion_row(element: etree._Element, context: LensContext) -> tuple:
+def distortion_row(element: etree._Element, context: LensContext, line: int) -> tuple:
     """The row of one ``<distortion>`` element (see
     :data:`~lensaudit.read.records.ROW_FIELDS`). The common case, a known
     model with plain numbers, takes a short path; anything else is examined
@@ -337,7 +341,7 @@ def distortion_row(element: etree._Element, context: LensContext) -> tuple:
                     )
                     values.append(NAN)
                     return (
-                        element.sourceline or 0,
+                        line,
                         *context.fields,
                         model,
                         focal,
@@ -346,10 +350,10 @@ def distortion_row(element: etree._Element, context: LensContext) -> tuple:
                         STATUS_OK,
                         "",
                     )
-    return _checked_distortion_row(element, context)
+    return _checked_distortion_row(element, context, line)
 
 
-def _checked_distortion_row(element: etree._Element, context: LensContext) -> tuple:
+def _checked_distortion_row(element: etree._Element, context: LensContext, line: int) -> tuple:
     """The row of one ``<distortion>`` element, every problem noted."""
     # Without a real-focal= attribute, the <real-focal-length> of its focal length.
     required = (
@@ -359,7 +363,7 @@ def _checked_distortion_row(element: etree._Element, context: LensContext) -> tu
     model, values, problems = checked_attributes(element, required, _MODEL_DEFAULTS, context)
     status, message = status_of(problems)
     return (
-        element.sourceline or 0,
+        line,
         *context.fields,
         model,
         values["focal"],
@@ -421,7 +425,7 @@ class CalibrationSpec:
         layout = itemgetter(*(names.index(n) if n in names else missing for n in wanted))
         return names, defaults, layout
 
-    def row(self, element: etree._Element, context: LensContext) -> tuple:
+    def row(self, element: etree._Element, context: LensContext, line: int) -> tuple:
         """The row of one element. The common case (plain numbers) takes a short
         path; anything else is examined in full, to the same result."""
         get = element.get
@@ -442,7 +446,7 @@ class CalibrationSpec:
                         if total - total == 0 and min(values[: len(self.required)]) > 0:
                             values.append(NAN)
                             return (
-                                element.sourceline or 0,
+                                line,
                                 *context.calibration_fields,
                                 model,
                                 *layout(values),
@@ -452,7 +456,7 @@ class CalibrationSpec:
         required = [(attribute, None) for attribute in self.required]
         model, values, problems = checked_attributes(element, required, self.models, context)
         return (
-            element.sourceline or 0,
+            line,
             *context.calibration_fields,
             model,
             values.get("focal", NAN),
@@ -491,24 +495,35 @@ SPECS = {
 _DISTORTION = "distortion"
 
 
-def file_tables(root: etree._Element, calibrations: bool) -> tuple:
-    """(lens rows, distortion rows, lens index of each, omitted coefficients of
-    each, vignetting rows, tca rows) of a tree; without ``calibrations``, the
-    last two are None."""
-    tags = (_DISTORTION, VIGNETTING, TCA) if calibrations else (_DISTORTION,)
-    lenses, found = elements_in_context(root, tags)
-    distortion, lens_of_row, omitted = [], [], []
-    vignetting: list[tuple] = []
-    tca: list[tuple] = []
-    rows = {VIGNETTING: vignetting, TCA: tca}
-    for element, context in found:
-        tag = element.tag
-        if tag == _DISTORTION:
-            distortion.append(distortion_row(element, context))
-            lens_of_row.append(context.index)
-            omitted.append(omitted_coefficients(element))
-        else:
-            rows[tag].append(SPECS[tag].row(element, context))
-    if not calibrations:
-        return lenses, distortion, lens_of_row, omitted, None, None
-    return lenses, distortion, lens_of_row, omitted, vignetting, tca
+class FileReader:
+    """Reads the pieces of one document (see :func:`lensaudit.read.xml.parse`)
+    into its tables: lens rows, distortion rows with the lens index and
+    omitted coefficients of each, and with ``calibrations``, vignetting and
+    TCA rows (else None)."""
+
+    def __init__(self, calibrations: bool) -> None:
+        self.tags = (_DISTORTION, VIGNETTING, TCA) if calibrations else (_DISTORTION,)
+        self.lenses: list[tuple] = []
+        self.distortion: list[tuple] = []
+        self.lens_of_row: list[int | None] = []
+        self.omitted: list[tuple[str, ...]] = []
+        self.vignetting: list[tuple] | None = [] if calibrations else None
+        self.tca: list[tuple] | None = [] if calibrations else None
+
+    def add(self, piece: etree._Element, line_of: LineOf) -> None:
+        """Read one piece of the document."""
+        lenses, found = elements_in_context(piece, self.tags, len(self.lenses), line_of)
+        self.lenses += lenses
+        rows = {VIGNETTING: self.vignetting, TCA: self.tca}
+        for element, context in found:
+            tag = element.tag
+            if tag == _DISTORTION:
+                self.distortion.append(distortion_row(element, context, line_of(element)))
+                self.lens_of_row.append(context.index)
+                self.omitted.append(omitted_coefficients(element))
+            else:
+                rows[tag].append(SPECS[tag].row(element, context, line_of(element)))  # type: ignore[union-attr]
+
+
+#: The elements a :class:`FileReader` reads (what a root may be to be read whole).
+READ = ("lens", "calibration", _DISTORTION, VIGNETTING, TCA)

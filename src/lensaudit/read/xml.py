@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import re
 from collections import namedtuple
+from collections.abc import Callable
+from typing import Any, Protocol, TypeVar
 
 from .records import STATUS_NOT_DATABASE, STATUS_OK, STATUS_XML_ERROR
 
@@ -22,6 +24,8 @@ from .records import STATUS_NOT_DATABASE, STATUS_OK, STATUS_XML_ERROR
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from lxml import etree
+
+V = TypeVar("V", bound="Visitor")
 
 #: The root element of a Lensfun database file.
 DATABASE_ROOT = "lensdatabase"
@@ -44,17 +48,13 @@ _REFERENCE = re.compile(
 class Parsed(
     namedtuple(
         "Parsed",
-        ("root", "status", "line", "column", "problem"),
+        ("status", "line", "column", "problem"),
         defaults=(STATUS_OK, 0, 0, ""),
     )
 ):
-    """A file's XML tree and what is wrong with the file as a whole.
-
-    ``status`` is ``ok``, ``xml_error`` (``root`` is then what libxml2's
-    recovery mode can still read, or None) or ``not_database`` (the root is
-    not ``<lensdatabase>``); ``line`` and ``column`` say where, ``problem``
-    says what, without the position.
-    """
+    """What is wrong with a file as a whole: ``status`` is ``ok``, ``xml_error``
+    or ``not_database`` (the root is not ``<lensdatabase>``); ``line`` and
+    ``column`` say where, ``problem`` says what, without the position."""
 
     __slots__ = ()
 
@@ -78,48 +78,220 @@ class Parsed(
         return self.problem
 
 
-def parser(recover: bool = False) -> etree.XMLParser:
+class Visitor(Protocol):
+    """What :func:`parse` hands a document to, piece by piece, in document order:
+    each child of the root element once it is complete (or the root itself,
+    where it is one of the elements read), with the function that gives an
+    element's line."""
+
+    def add(self, piece: etree._Element, line_of: Callable[[etree._Element], int]) -> None: ...
+
+
+def parser(recover: bool = False, **options: Any) -> etree.XMLParser:
     """An lxml parser that never touches the network, DTDs or entities."""
     from lxml import etree
 
-    return etree.XMLParser(
-        recover=recover,
-        resolve_entities=False,
-        no_network=True,
-        load_dtd=False,
-        dtd_validation=False,
-        attribute_defaults=False,
-        huge_tree=False,
-        remove_pis=True,
-        collect_ids=False,  # no table of xml:id values: nothing looks them up
-    )
+    return etree.XMLParser(recover=recover, **_OPTIONS, **options)
 
 
-def parse(data: bytes) -> Parsed:
-    """Parse one file's content, as liblensfun reads it: without namespaces."""
+#: The options of every parser: no network, DTD, entity or attribute default.
+_OPTIONS = dict(
+    resolve_entities=False,
+    no_network=True,
+    load_dtd=False,
+    dtd_validation=False,
+    attribute_defaults=False,
+    huge_tree=False,
+    remove_pis=True,
+    collect_ids=False,  # no table of xml:id values: nothing looks them up
+)
+#: Bytes fed to the parser at a time: the tree read so far is cleared between feeds.
+_FEED = 1 << 20
+#: What a Lensfun database holds at its top level; other children are visited in order too.
+_TOP_LEVEL = ("lens", "camera", "mount")
+
+
+def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> tuple[Parsed, V]:
+    """Parse one file's content as liblensfun reads it (without namespaces),
+    handing its pieces to a visitor made by ``visitor()``; ``read`` names
+    the elements the visitor reads (for a root that is one of them).
+
+    The document is parsed as a stream: each top-level piece is visited as
+    soon as it is complete, then dropped, so that memory holds one piece at
+    a time. A file that is not well-formed is visited again, from the start,
+    by a new visitor, as far as libxml2's recovery mode can read it.
+    """
     from lxml import etree
 
     if b"\r" in data:  # XML's line-end normalization, done first so lines count
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    found = unknown_reference(data) if b"&" in data and b"<!DOCTYPE" in data else None
+    if found is not None:
+        return _recovered(data, visitor, read, *found)
+    lines = _Lines(data) if data.count(b"\n") >= _LIBXML2_LINES else None
+    visiting = visitor()
     try:
-        root = etree.fromstring(data, parser())
+        if b"xmlns" in data or _root_name(data) in read:  # read as one tree
+            root = etree.fromstring(data, parser())
+            _use_local_names(root)
+            _visit_tree(root, visiting, read, _line_getter(lines, root))
+        else:
+            root = _stream(data, visiting, lines)
     except etree.XMLSyntaxError as error:
-        line, column, problem = syntax_error(data, error)
-        return Parsed(_recovered(data), STATUS_XML_ERROR, line, column, problem)
-    if b"&" in data and b"<!DOCTYPE" in data:
-        found = unknown_reference(data)
-        if found is not None:
-            line, column, problem = found
-            return Parsed(_recovered(data), STATUS_XML_ERROR, line, column, problem)
-    if b"xmlns" in data:
-        _use_local_names(root)
+        return _recovered(data, visitor, read, *syntax_error(data, error))
     if root.tag != DATABASE_ROOT:
         tag = root.tag if isinstance(root.tag, str) else "?"
         if len(tag) > 40:
             tag = tag[:40] + "..."
         problem = f"root element is <{tag}>, not <{DATABASE_ROOT}>: not a Lensfun database file"
-        return Parsed(root, STATUS_NOT_DATABASE, root.sourceline or 1, 0, problem)
-    return Parsed(root)
+        line = lines.first if lines is not None else root.sourceline or 1
+        return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
+    return Parsed(), visiting
+
+
+def _root_name(data: bytes) -> str:
+    """The name of the first start tag of a document ("" if none)."""
+    for match in _MARKUP.finditer(data):
+        if match.group(1) is not None:
+            return match.group(1).decode("utf-8", "replace")
+    return ""
+
+
+def _stream(data: bytes, visiting: Visitor, lines: _Lines | None) -> Any:
+    """Parse ``data`` piece by piece (see :func:`parse`); the root, emptied."""
+    from lxml import etree
+
+    pull = etree.XMLPullParser(events=("end",), tag=_TOP_LEVEL, **_OPTIONS)
+    line_of = _line_getter(lines, None)
+    for start in range(0, len(data), _FEED):
+        pull.feed(data[start : start + _FEED])
+        for _, element in pull.read_events():
+            root = element.getparent()
+            if root is None or root.getparent() is not None:
+                continue  # not a child of the root: visited with its top-level piece
+            # Earlier children (other than lenses, cameras, mounts), then this one.
+            while root[0] is not element:
+                _visit_piece(root[0], visiting, line_of, lines)
+                del root[0]
+            _visit_piece(element, visiting, line_of, lines)
+            element.clear()
+            del root[0]
+    root = pull.close()
+    for child in root:
+        _visit_piece(child, visiting, line_of, lines)
+    return root
+
+
+def _visit_piece(
+    piece: Any, visiting: Visitor, line_of: Callable[[Any], int], lines: _Lines | None
+) -> None:
+    if lines is not None:
+        lines.number(piece)
+    if isinstance(piece.tag, str):  # comments have a function as tag
+        visiting.add(piece, line_of)
+
+
+def _visit_tree(root: Any, visiting: Visitor, read: tuple[str, ...], line_of: Callable) -> None:
+    """Visit a whole tree: its root if it is an element read, else each child."""
+    if root.tag in read:
+        visiting.add(root, line_of)
+        return
+    for child in root:
+        if isinstance(child.tag, str):
+            visiting.add(child, line_of)
+
+
+def _recovered(
+    data: bytes,
+    visitor: Callable[[], V],
+    read: tuple[str, ...],
+    line: int,
+    column: int,
+    problem: str,
+) -> tuple[Parsed, V]:
+    """A file that is not well-formed: what recovery mode can read of it, visited."""
+    from lxml import etree
+
+    visiting = visitor()
+    try:
+        root = etree.fromstring(data, parser(recover=True))
+    except etree.XMLSyntaxError:
+        root = None
+    if root is not None:
+        if b"xmlns" in data:
+            _use_local_names(root)
+        _visit_tree(root, visiting, read, _line_getter(None, root))
+    return Parsed(STATUS_XML_ERROR, line, column, problem), visiting
+
+
+def _use_local_names(root: etree._Element) -> None:
+    """Drop namespaces from element names, in place: liblensfun's parser does not
+    know them, so an element in a default namespace has its plain name."""
+    for element in root.iter():
+        tag = element.tag
+        if isinstance(tag, str) and tag.startswith("{"):
+            element.tag = tag.partition("}")[2]
+
+
+#: libxml2 numbers lines up to this; beyond, an element's line is a guess.
+_LIBXML2_LINES = 65535
+# The markup of a document, for finding where each start tag ends: comments,
+# CDATA sections, processing instructions, the document type and end tags
+# (group 1 None), and start tags (group 1 their name).
+_MARKUP = re.compile(
+    rb"<!--.*?-->|<!\[CDATA\[.*?\]\]>|<\?.*?\?>|<!DOCTYPE(?:[^\[>]|\[.*?\]\s*)*>|</[^>]*>"
+    rb"|<([^\s/>!?][^\s/>]*)(?:[^>\"']|\"[^\"]*\"|'[^']*')*>",
+    re.DOTALL,
+)
+
+
+class _Lines:
+    """The lines of a document's elements, for a file longer than libxml2 numbers:
+    the line where each start tag ends, in document order, given to the
+    elements of each piece as it is visited (:meth:`number`)."""
+
+    def __init__(self, data: bytes) -> None:
+        starts = []
+        line, position = 1, 0
+        for match in _MARKUP.finditer(data):
+            if match.group(1) is not None:
+                end = match.end() - 1
+                line += data.count(b"\n", position, end)
+                position = end
+                starts.append(line)
+        self.first = starts[0] if starts else 1
+        self._starts = starts
+        self._next = 1  # the root's is the first
+        self.of: dict[Any, int] = {}
+
+    def number(self, piece: Any) -> None:
+        """Number the elements of the next piece in document order."""
+        self.of.clear()  # the elements of earlier pieces are gone
+        elements = [e for e in piece.iter() if isinstance(e.tag, str)]
+        found = self._starts[self._next : self._next + len(elements)]
+        self._next += len(elements)
+        self.of.update(zip(elements, found, strict=False))  # any left: libxml2 numbers them
+
+
+def _line_getter(lines: _Lines | None, root: Any) -> Callable[[Any], int]:
+    """The function giving an element's line: libxml2's, or from ``lines``
+    (for a whole tree given as ``root``, numbered at once)."""
+    if lines is None:
+        return _libxml2_line
+    if root is not None:
+        lines.number(root)
+        lines.of[root] = lines.first
+    of = lines.of
+
+    def line_of(element: Any) -> int:
+        found = of.get(element)
+        return found if found is not None else _libxml2_line(element)
+
+    return line_of
+
+
+def _libxml2_line(element: Any) -> int:
+    return element.sourceline or 0
 
 
 def unknown_reference(data: bytes) -> tuple[int, int, str] | None:
@@ -140,28 +312,6 @@ def unknown_reference(data: bytes) -> tuple[int, int, str] | None:
                 ),
             )
     return None
-
-
-def _recovered(data: bytes) -> etree._Element | None:
-    """What libxml2's recovery mode can still read of a broken file, or None."""
-    from lxml import etree
-
-    try:
-        root = etree.fromstring(data, parser(recover=True))
-    except etree.XMLSyntaxError:
-        return None
-    if root is not None and b"xmlns" in data:
-        _use_local_names(root)
-    return root
-
-
-def _use_local_names(root: etree._Element) -> None:
-    """Drop namespaces from element names, in place: liblensfun's parser does not
-    know them, so an element in a default namespace has its plain name."""
-    for element in root.iter():
-        tag = element.tag
-        if isinstance(tag, str) and tag.startswith("{"):
-            element.tag = tag.partition("}")[2]
 
 
 def syntax_error(data: bytes, error: Exception) -> tuple[int, int, str]:
