@@ -28,10 +28,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from lensaudit import database, loader  # noqa: E402
-from lensaudit.loader import LoadError  # noqa: E402
-from lensaudit.pipeline import audit_entries, run  # noqa: E402
-from lensaudit.report import ReportExistsError, paper, write_report  # noqa: E402
+from lensaudit import read  # noqa: E402
+from lensaudit.read import LoadError  # noqa: E402
+from lensaudit.report import (  # noqa: E402
+    ReportAudits,
+    ReportExistsError,
+    audit,
+    paper,
+    write_report,
+)
 from lensaudit.report.histogram import figure5  # noqa: E402
 
 #: Where the Lensfun repository keeps its database.
@@ -118,23 +123,24 @@ def main(argv: list[str] | None = None) -> int:
             if args.git:
                 commit, description = git_revision(args.git, args.date)
                 directory = extract(args.git, commit, Path(temporary))
-                source = database.DatabaseSource(
+                source = read.DatabaseSource(
                     (directory,), f"Lensfun git revision {commit[:12]} ({description})"
                 )
-                loaded = loader.load(source.paths)
-                audit = audit_entries(loaded.entries, source, loaded.files)
+                files = read.read_files(read.expand(source.paths), calibrations=True)
+                audits = ReportAudits.of_database(read.Database(source, files))
             else:
-                audit = run(args.paths or None)
-            comparison = paper.compare(audit, values)
+                audits = audit(args.paths or None)
+            omitted = paper.omitted_coefficients(audits.distortion, audits.files)
+            comparison = paper.compare(audits.distortion, values, omitted)
             print("\n".join(paper.text_lines(comparison)))
-            histogram = figure5(audit)
+            histogram = figure5(audits.distortion)
             print(
                 f"\nFigure 5: {histogram.entries} rectilinear entries with finite r_max; "
                 f"{histogram.below_one} below 1 in correct units, "
                 f"{histogram.below_one_paper} in the paper's units."
             )
             if args.output:
-                written = write_report(audit, args.output, force=args.force, paper_values=values)
+                written = write_report(audits, args.output, force=args.force, paper_values=values)
                 print(
                     f"Wrote {len(written)} files into {args.output} "
                     f"(fig5_r_normalized.png, paper_comparison.md, report.html, ...)"

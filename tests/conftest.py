@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from lensaudit.database import bundled_database_path
+from lensaudit.read.paths import bundled_database_path
 
 #: Git run by the tests: a fixed identity, and no system or user configuration.
 GIT_ENVIRONMENT = {

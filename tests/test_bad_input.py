@@ -13,7 +13,6 @@ import io
 import os
 import subprocess
 import sys
-import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import pytest
@@ -22,9 +21,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import lens_xml
-from lensaudit import loader
 from lensaudit.cli import main
-from lensaudit.database import bundled_database_path, resolve
+from lensaudit.read import paths
+from lensaudit.read.paths import bundled_database_path, resolve
 
 TWO_LENSES = """\
 <lensdatabase version="2">
@@ -100,12 +99,16 @@ def test_empty_real_focal_is_a_bad_value_not_one_millimetre(write_xml):
     assert entry["real_focal"] == ""
 
 
-def test_crop_factor_is_the_whole_text_content_around_a_comment(write_xml):
+def test_text_split_by_a_comment_is_read_as_liblensfun_reads_it(write_xml):
+    from liblensfun_master import lenses
+
     text = TWO_LENSES.format(aspect="4:3", crop="1<!-- note -->.5", real_focal="")
-    expected = float(ElementTree.fromstring(text).findall("lens")[1].find("cropfactor").text)
-    assert expected == 1.5  # the standard library's reading, the reference
-    _, entry = scan_csv(write_xml(text))
-    assert float(entry["crop_factor"]) == expected
+    text = text.replace("<maker>Test</maker>", "<maker>Te<!-- a note -->st</maker>", 1)
+    theirs = {lens["model"]: lens for lens in lenses(text.encode())}
+    broken, fine = scan_csv(write_xml(text))
+    assert float(fine["crop_factor"]) == pytest.approx(theirs["Fine"]["crop_factor"], rel=1e-6)
+    assert theirs["Fine"]["crop_factor"] == pytest.approx(0.5)  # the text after the comment
+    assert broken["maker"] == theirs["Broken ratio"]["maker"] == "st"
 
 
 # --- what a file is ------------------------------------------------------------
@@ -187,14 +190,14 @@ def test_too_long_a_path_name_is_one_line_and_exit_2(tmp_path):
 def test_unreadable_file_is_a_status_row_with_the_reason(write_xml, monkeypatch):
     good = write_xml(lens_xml('<distortion model="poly3" focal="10" k1="-0.01"/>'), "good.xml")
     locked = write_xml(lens_xml('<distortion model="poly3" focal="10" k1="-0.01"/>'), "locked.xml")
-    real = loader.read_file
+    real = paths.read_file
 
     def read_file(path):
         if Path(path).name == locked.name:
             raise PermissionError(13, "Permission denied")
         return real(path)
 
-    monkeypatch.setattr(loader, "read_file", read_file)
+    monkeypatch.setattr(paths, "read_file", read_file)
     result = CliRunner().invoke(main, ["scan", "--no-cache", "--format", "csv", str(good.parent)])
     statuses = {row["file"]: (row["status"], row["message"]) for row in rows(result)}
     assert statuses["good.xml"][0] == "ok"

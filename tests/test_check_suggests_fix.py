@@ -12,8 +12,9 @@ import subprocess
 import pytest
 from click.testing import CliRunner
 
-from lensaudit import check, loader
+from lensaudit import check
 from lensaudit.cli import main
+from lensaudit.read import DistortionEntry
 
 
 def test_every_fold_in_the_image_names_a_fix_command_that_selects_it(bundled_db):
@@ -31,9 +32,7 @@ def test_every_fold_in_the_image_names_a_fix_command_that_selects_it(bundled_db)
 
 @pytest.mark.parametrize("name", ['Odd "$HOME" `x` \\ lens', "Plain 14-42mm f/3.5-5.6", "It's"])
 def test_the_suggested_lens_name_survives_a_posix_shell(name):
-    entry = loader.DistortionEntry(
-        "x.xml", 1, "Maker", name, (), "rectilinear", 1.0, 1.5, "ptlens", 11.0
-    )
+    entry = DistortionEntry("x.xml", 1, "Maker", name, (), "rectilinear", 1.0, 1.5, "ptlens", 11.0)
     command = re.search(
         r"`lensaudit fix --lens (.+) --focal 11` refits it", check._fix_suggestion(entry)
     )

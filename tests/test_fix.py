@@ -24,11 +24,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from conftest import lens_xml
-from lensaudit import fix
+from lensaudit import fix, read
 from lensaudit.cli import main
-from lensaudit.loader import STATUS_OK, load, load_bytes
 from lensaudit.metrics import compute
 from lensaudit.pipeline import run
+from lensaudit.read.records import STATUS_OK
 from lensaudit.xmlpatch import PatchError, write
 
 R = sympy.Symbol("r", positive=True)
@@ -221,7 +221,7 @@ def test_within_a_smaller_image_radius_changes_are_measured_inside_it():
     xml = lens_xml(
         '<distortion model="ptlens" focal="4.5" a="-0.21693" b="-0.44076" c="-0.47357"/>'
     )
-    (entry,) = load_bytes(xml.encode(), "t.xml")
+    (entry,) = read.read_bytes(xml.encode(), "t.xml").entries()
     result = fix.fix_entry(entry, image_radius=1.0, tolerance=math.inf)
     assert result.goal.r_corner == 1.0 and result.goal.target == 1.0
     d = exact_d("ptlens", texts_of(result, new=True))
@@ -329,7 +329,7 @@ def test_a_coefficient_missing_from_the_file_is_added(tmp_path):
     path, result, patches = entry_from(xml, tmp_path, tolerance=math.inf)
     assert result.old_texts == ("-0.03", "0", "0.005")
     write(patches[0])
-    (entry,) = load(path).entries
+    (entry,) = read.read(path).entries()
     assert entry.status == STATUS_OK
     assert (entry.a, entry.b, entry.c) == tuple(float(t) for t in result.new_texts)
     new_line = path.read_text().splitlines()[entry.line - 1]
@@ -349,6 +349,21 @@ def test_an_entry_moved_since_the_audit_is_not_patched_and_says_why(tmp_path):
     assert "no <distortion> element ends on this line" in result.message
     assert "changed since it was read" in result.message
     assert fix.patches([result], sources) == []
+
+
+@pytest.mark.parametrize("line_end", ["\r\n", "\r"], ids=["CRLF", "CR"])
+def test_a_file_with_other_line_ends_is_patched_on_the_readers_line(tmp_path, line_end):
+    xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    path = tmp_path / "one.xml"
+    path.write_bytes(xml.replace("\n", line_end).encode())
+    audit = run(str(path))
+    indices = fix.select(audit)
+    sources = fix.read_sources(audit, indices)
+    (result,) = fix.fix_audit(audit, indices, sources=sources, tolerance=math.inf)
+    assert result.status == fix.STATUS_FIXED
+    (patch,) = fix.patches([result], sources)
+    assert b'a="-0.024"' not in patch.patched  # the new coefficients are written
+    assert patch.patched.count(line_end.encode()) == patch.original.count(line_end.encode())
 
 
 def test_an_element_written_with_character_references_is_not_patched(tmp_path):
@@ -410,7 +425,7 @@ def test_any_ptlens_fold_is_refitted_to_meet_its_goal_exactly(a, b, c, aspect):
         f'<calibration><distortion model="ptlens" focal="10" a="{a}" b="{b}" c="{c}"/>'
         "</calibration></lens></lensdatabase>"
     )
-    (entry,) = load_bytes(text.encode(), "t.xml")
+    (entry,) = read.read_bytes(text.encode(), "t.xml").entries()
     result = fix.fix_entry(entry, tolerance=math.inf, texts={"a": a, "b": b, "c": c})
     assert result.status == fix.STATUS_FIXED, result.message
     d = exact_d("ptlens", texts_of(result, new=True))

@@ -19,8 +19,8 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import lens_xml
+from lensaudit import read
 from lensaudit.cli import main
-from lensaudit.loader import load
 from lensaudit.pipeline import run
 from lensaudit.projection import (
     LensfunCalibration,
@@ -30,7 +30,6 @@ from lensaudit.projection import (
     opencv_camera,
     project,
     r_max_pixels,
-    real_focal_from_xml,
     source_pixels,
     undistortion_map,
     valid_region_mask,
@@ -207,17 +206,11 @@ def fisheye_directions(centre_x, centre_y, focal_pixels, xs, ys):
 
 
 @pytest.mark.parametrize("place", [p[:2] for p in REAL_FOCAL] + NOMINAL_FOCAL)
-def test_focal_length_in_pixels_is_liblensfun_geometry_focal(audit, lenses, bundled_db, place):
+def test_focal_length_in_pixels_is_liblensfun_geometry_focal(audit, lenses, place):
     entry = by_place(audit, *place)
     lens = lenses[(entry.maker, entry.lens, float(np.float32(entry.crop_factor)))]
     width, height, crop = 3000, 2000, entry.crop_factor * 1.25
-    camera = lensfun_camera(
-        entry,
-        width,
-        height,
-        crop,
-        real_focal=real_focal_from_xml(bundled_db / entry.file, entry.line),
-    )
+    camera = lensfun_camera(entry, width, height, crop)
     mod = modifier(
         lens, entry, width, height, crop, flags=GEOMETRY, target=lensfunpy.LensType.FISHEYE
     )
@@ -226,17 +219,11 @@ def test_focal_length_in_pixels_is_liblensfun_geometry_focal(audit, lenses, bund
 
 
 @pytest.mark.parametrize("place", [p[:2] for p in REAL_FOCAL] + NOMINAL_FOCAL[:3])
-def test_project_agrees_with_liblensfun_for_3d_points(audit, lenses, bundled_db, place):
+def test_project_agrees_with_liblensfun_for_3d_points(audit, lenses, place):
     entry = by_place(audit, *place)
     lens = lenses[(entry.maker, entry.lens, float(np.float32(entry.crop_factor)))]
     width, height, crop = 1500, 1000, entry.crop_factor
-    camera = lensfun_camera(
-        entry,
-        width,
-        height,
-        crop,
-        real_focal=real_focal_from_xml(bundled_db / entry.file, entry.line),
-    )
+    camera = lensfun_camera(entry, width, height, crop)
     geometry_only = modifier(
         lens, entry, width, height, crop, flags=GEOMETRY, target=lensfunpy.LensType.FISHEYE
     )
@@ -259,14 +246,28 @@ def test_project_agrees_with_liblensfun_for_3d_points(audit, lenses, bundled_db,
     assert np.abs(pixels[valid] - expected[valid]).max() < TOLERANCE_PX
 
 
-def test_real_focal_is_read_from_the_database(bundled_db, write_xml):
+def test_the_cameras_real_focal_is_the_entrys(audit, write_xml):
     for file, line, real_focal in REAL_FOCAL:
-        assert real_focal_from_xml(bundled_db / file, line) == pytest.approx(real_focal)
-    assert math.isnan(real_focal_from_xml(bundled_db / "slr-tokina.xml", 17))
+        entry = by_place(audit, file, line)
+        assert entry.real_focal == pytest.approx(real_focal)
+        assert lensfun_camera(entry, 600, 400) == lensfun_camera(
+            entry, 600, 400, real_focal=entry.real_focal
+        )
+    assert math.isnan(by_place(audit, "slr-tokina.xml", 17).real_focal)
     path = write_xml(
-        lens_xml('<distortion model="poly3" focal="10" k1="-0.01" real-focal="10.4"/>')
+        lens_xml(
+            '<distortion model="poly3" focal="10" k1="-0.01" real-focal="10.4"/>',
+            '<distortion model="poly3" focal="12" k1="-0.01"/>',
+            '<real-focal-length focal="12" real-focal="12.5"/>',
+        )
     )
-    assert real_focal_from_xml(path, 10) == 10.4
+    entries = read.read(path).entries()
+    assert [e.real_focal for e in entries] == [10.4, 12.5]
+    # The real focal length sets the camera's focal length in pixels.
+    assert (
+        lensfun_camera(entries[0], 600, 400).fx
+        != lensfun_camera(entries[0], 600, 400, real_focal=10.0).fx
+    )
 
 
 # --- The valid region: every pixel read from beyond the fold is invalid -----------------------
@@ -451,7 +452,8 @@ def test_fisheye_entries_have_a_valid_region_but_no_pinhole_projection(audit):
 
 
 def test_unusable_entries_and_images_are_refused(write_xml):
-    entries = load(write_xml(lens_xml('<distortion model="acm" focal="10" k1="0.1"/>'))).entries
+    path = write_xml(lens_xml('<distortion model="acm" focal="10" k1="0.1"/>'))
+    entries = read.read(path).entries()
     with pytest.raises(ProjectionError, match="unknown_model"):
         lensfun_camera(entries[0], 600, 400)
     with pytest.raises(ProjectionError, match="at least 2x2"):

@@ -19,8 +19,7 @@ from urllib.parse import quote
 import pytest
 from lxml import html as lxml_html
 
-from lensaudit.pipeline import run
-from lensaudit.report import paper, write_report
+from lensaudit.report import audit, paper, write_report
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 BROWSER = next((shutil.which(name) for name in BROWSERS if shutil.which(name)), None)
@@ -74,7 +73,7 @@ def table_rows(dom):
 def bundled(bundled_db, tmp_path_factory):
     """The report of the bundled database, with the paper comparison (the widest page)."""
     out = tmp_path_factory.mktemp("bundled")
-    write_report(run(bundled_db), out, paper_values=paper.load_values())
+    write_report(audit(bundled_db), out, paper_values=paper.load_values())
     with (out / "entries.csv").open(newline="") as stream:
         entries = list(csv.DictReader(stream))
     return out / "report.html", entries
@@ -145,7 +144,7 @@ def test_hostile_names_stay_text_in_the_browser(write_xml, tmp_path, profile):
     path = write_xml(f"""<lensdatabase version="2"><lens><maker>Evil</maker>
         <model>{name}</model><mount>M</mount><cropfactor>1</cropfactor><calibration>
         <distortion model="poly3" focal="10" k1="-0.3"/></calibration></lens></lensdatabase>""")
-    write_report(run(path.parent), tmp_path / "out")
+    write_report(audit(path.parent), tmp_path / "out")
     dom = rendered(tmp_path / "out" / "report.html", "", profile)
     assert dom.xpath("//body/@data-pwned") == []
     assert not dom.xpath("//img")

@@ -132,6 +132,54 @@ def test_paper_option_adds_the_comparison(runner, small_db, tmp_path):
     assert 'id="paper"' in (target / "report.html").read_text()
 
 
+CALIBRATED = (
+    '<distortion model="poly3" focal="10" k1="-0.3"/>',
+    '<vignetting model="pa" focal="10" aperture="2.8" distance="10" k1="-0.5"/>',
+    '<tca model="poly3" focal="10" vr="1.001" vb="0.999"/>',
+)
+
+
+@pytest.fixture
+def parses(monkeypatch):
+    """The contents the reader's parser is given, in order."""
+    from lensaudit.read import xml
+
+    given = []
+    parse = xml.parse
+
+    def counted(data, *arguments, **options):
+        given.append(data)
+        return parse(data, *arguments, **options)
+
+    monkeypatch.setattr(xml, "parse", counted)
+    return given
+
+
+def test_a_report_parses_each_file_once(runner, write_xml, tmp_path, parses):
+    first = write_xml(lens_xml(*CALIBRATED), "a.xml")
+    second = write_xml(lens_xml(*CALIBRATED[:2], cropfactor="1.5"), "b.xml")
+    target = tmp_path / "report"
+    arguments = ["report", "--no-cache", "--paper", str(first.parent), "-o", str(target)]
+    result = runner.invoke(main, arguments)
+    assert result.exit_code == 0, result.output
+    assert sorted(parses) == sorted([first.read_bytes(), second.read_bytes()])
+    # Distortion, vignetting and TCA all come from that one read.
+    assert len((target / "entries.csv").read_text().splitlines()) == 3
+    assert len((target / "vignetting.csv").read_text().splitlines()) == 3
+    assert len((target / "tca.csv").read_text().splitlines()) == 2
+
+
+def test_a_report_of_an_unchanged_database_parses_nothing_with_the_cache(
+    runner, small_db, tmp_path, parses
+):
+    first = runner.invoke(main, ["report", str(small_db), "-o", str(tmp_path / "one")])
+    assert first.exit_code == 0 and len(parses) == 1
+    second = runner.invoke(main, ["report", str(small_db), "-o", str(tmp_path / "two")])
+    assert second.exit_code == 0 and len(parses) == 1
+    for name in ("entries.csv", "vignetting.csv", "tca.csv", "summary.json"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+
+
 def test_default_is_the_bundled_database(runner, tmp_path):
     target = tmp_path / "report"
     result = runner.invoke(main, ["report", "-o", str(target)])

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from lensaudit.database import content_hash, lensfunpy_version
 from lensaudit.pipeline import run
+from lensaudit.read.paths import lensfunpy_version
 from lensaudit.report import tables
+from lensaudit.report.provenance import content_hash
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 

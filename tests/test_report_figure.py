@@ -18,16 +18,15 @@ from lxml import etree
 from matplotlib.container import BarContainer
 from matplotlib.text import Annotation
 
-from lensaudit.pipeline import run
-from lensaudit.report import figures, histogram, write_report
+from lensaudit.report import audit, figures, histogram, write_report
 
 
 @pytest.fixture(scope="module")
 def bundled_report(bundled_db, tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    audit = run(bundled_db)
-    write_report(audit, out)
-    return audit, out
+    audits = audit(bundled_db)
+    write_report(audits, out)
+    return audits.distortion, out
 
 
 def rectilinear_finite(out, column):

@@ -13,9 +13,8 @@ import pytest
 from lxml import html as lxml_html
 
 from lensaudit import __version__
-from lensaudit.database import lensfunpy_version
-from lensaudit.pipeline import run
-from lensaudit.report import write_report
+from lensaudit.read.paths import lensfunpy_version
+from lensaudit.report import audit, write_report
 
 HOSTILE_LENS = "<script>document.body.setAttribute('data-pwned','1')</script>"
 HOSTILE_MAKER = 'A&B "quoted" <b>bold</b>'
@@ -51,7 +50,7 @@ def hostile_report(tmp_path_factory):
     (database / "hostile.xml").write_text(HOSTILE_XML, encoding="utf-8")
     (database / "timestamp.txt").write_text(TIMESTAMP + "\n", encoding="ascii")
     out = root / "report"
-    write_report(run(database), out)
+    write_report(audit(database), out)
     return database, out, (out / "report.html").read_text(encoding="utf-8")
 
 

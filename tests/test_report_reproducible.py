@@ -9,8 +9,7 @@ import sys
 
 import pytest
 
-from lensaudit.pipeline import run
-from lensaudit.report import REPORT_FILES, write_report
+from lensaudit.report import REPORT_FILES, audit, write_report
 
 # 2021-05-30 and 2024-02-29, 12:00 UTC.
 EPOCHS = ("1622376000", "1709208000")
@@ -25,7 +24,7 @@ def two_reports(bundled_db, tmp_path_factory):
         for epoch in EPOCHS:
             patch.setenv("SOURCE_DATE_EPOCH", epoch)
             out = tmp_path_factory.mktemp(f"report-{epoch}")
-            write_report(run(bundled_db), out)
+            write_report(audit(bundled_db), out)
             directories.append(out)
     return directories
 

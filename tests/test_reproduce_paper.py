@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from conftest import lens_xml
-from lensaudit.pipeline import run
-from lensaudit.report import paper
+from lensaudit.report import audit, paper
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLE = Path(
@@ -111,10 +110,12 @@ def test_omitted_coefficients_are_found_in_the_xml(write_xml):
             '<distortion model="ptlens" focal="10" b="-0.02"/>',
             '<distortion model="ptlens" focal="20" a="0" b="0" c="0.01"/>',
             '<distortion model="poly5" focal="30" k1="0.1"/>',
+            '<distortion model="poly5" focal="40" k1="x"/>',  # not audited: left out
         )
     )
-    audit = run(path.parent)
-    assert paper.omitted_coefficients(audit) == {0: ("a", "c"), 2: ("k2",)}
+    audits = audit(path.parent)
+    omitted = paper.omitted_coefficients(audits.distortion, audits.files)
+    assert omitted == {0: ("a", "c"), 2: ("k2",)}
 
 
 def paper_values_for(counts, rectilinear_finite, below_one):
@@ -160,7 +161,13 @@ def omitting_db(write_xml):
             '<distortion model="poly3" focal="30" k1="-0.3"/>',
         )
     )
-    return run(path.parent)
+    return audit(path.parent)
+
+
+def compare(audits, values):
+    """The comparison as the report makes it."""
+    omitted = paper.omitted_coefficients(audits.distortion, audits.files)
+    return paper.compare(audits.distortion, values, omitted)
 
 
 def test_a_difference_from_omitted_coefficients_is_explained(omitting_db):
@@ -175,7 +182,7 @@ def test_a_difference_from_omitted_coefficients_is_explained(omitting_db):
         1,
         1,
     )
-    comparison = paper.compare(omitting_db, values)
+    comparison = compare(omitting_db, values)
     ptlens = [line for line in comparison.differences if line.startswith("Table 1, ptlens")]
     assert len(ptlens) == 1
     assert "1 of them omit a coefficient" in ptlens[0] and "test.xml:10" in ptlens[0]
@@ -187,7 +194,7 @@ def test_a_difference_from_omitted_coefficients_is_explained(omitting_db):
 
 def test_a_different_database_is_named_as_the_cause(omitting_db):
     values = paper.load_values()
-    comparison = paper.compare(omitting_db, values)
+    comparison = compare(omitting_db, values)
     assert comparison.differences[0].startswith("Database version")
     assert all(
         "not explained" not in line
@@ -207,7 +214,7 @@ def test_units_difference_lists_the_entries_that_fold_in_correct_units(omitting_
         2,
         0,
     )
-    comparison = paper.compare(omitting_db, values)
+    comparison = compare(omitting_db, values)
     units = [line for line in comparison.differences if line.startswith("Units")]
     # poly3 k1=-0.3 at 30 mm: D(r_max) = 1.04 < 1.80 (Hugin units), yet above the paper's
     # corner hypot(18, 12) / 30 = 0.72.
@@ -215,7 +222,7 @@ def test_units_difference_lists_the_entries_that_fold_in_correct_units(omitting_
 
 
 def test_text_and_markdown_show_both_values(omitting_db):
-    comparison = paper.compare(omitting_db, paper.load_values())
+    comparison = compare(omitting_db, paper.load_values())
     text = "\n".join(paper.text_lines(comparison))
     assert "1141 | 1" in text and "Differences" in text
     assert "1141 \\| 1" in paper.markdown(comparison)

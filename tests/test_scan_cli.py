@@ -17,13 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import lens_xml
-from lensaudit.cache import pack_entries
 from lensaudit.cli import main
 from lensaudit.columns import METRIC_FLOAT_COLUMNS, format_floats
-from lensaudit.database import DatabaseSource
+from lensaudit.read import DatabaseSource
 from lensaudit.formats import json_format, writer
-from lensaudit.loader import DistortionEntry, SourceFile
-from lensaudit.pipeline import COLUMNS, Audit, FileColumns, run
+from lensaudit.read import DistortionEntry, SourceFile
+from lensaudit.pipeline import COLUMNS, Audit, run
 
 EXPECTED_HEADER = (
     "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,real_focal,"
@@ -312,11 +311,9 @@ def audits(draw, statuses=SOME_PROBLEMS) -> Audit:
         st.lists(st.sampled_from([0, 1]), min_size=size, max_size=size)
     )
     source = DatabaseSource((Path("/db"),), draw(xml_texts))
-    if draw(st.booleans()):
-        entries = [entry for group in per_file for entry in group]
-        return Audit(source, files, entries, metric_columns=metrics)
-    parts = [FileColumns(pack_entries(group), len(group)) for group in per_file]
-    return Audit(source, files, metric_columns=metrics, parts=parts)
+    entries = [entry for group in per_file for entry in group]
+    columns = {name: [getattr(e, name) for e in entries] for name in DistortionEntry._fields}
+    return Audit(source, files, columns, metrics)
 
 
 def csv_field(value) -> str:
@@ -371,14 +368,14 @@ def test_json_is_what_the_json_module_writes_of_the_document(audit):
 
 
 def test_csv_of_the_bundled_database_is_what_the_csv_module_writes(bundled_db):
-    audit = run(bundled_db, formats=("csv",))
+    audit = run(bundled_db)
     written = io.StringIO()
     writer("csv")(audit, written)
     assert written.getvalue() == csv_by_the_csv_module(audit)
 
 
 def test_json_of_the_bundled_database_is_what_the_json_module_writes(bundled_db):
-    audit = run(bundled_db, formats=("json",))
+    audit = run(bundled_db)
     written = io.StringIO()
     writer("json")(audit, written)
     assert written.getvalue() == json_by_the_json_module(audit)

@@ -616,26 +616,10 @@ class CalibrationAudit:
         stream.write("\n".join(self.lines()) + "\n")
 
     def write_csv(self, stream: Any) -> None:
-        """One row per entry: floats in shortest round-trip form, ``inf``, or
-        empty for values that do not apply; booleans ``true``/``false``."""
-        from .columns import format_floats
-        from .formats.csv_format import text_column
+        """One row per entry (see :func:`lensaudit.formats.csv_format.write_rows`)."""
+        from .formats.csv_format import write_rows
 
-        booleans = {True: "true", False: "false", None: ""}
-        fields = []
-        for name, values in self.columns().items():
-            if name in self.FLOAT_COLUMNS:
-                fields.append(format_floats(values))
-            elif name in self.BOOL_COLUMNS:
-                fields.append([booleans[v] for v in values])
-            elif name == "line":
-                fields.append(list(map(str, values)))
-            else:
-                fields.append(text_column(values))
-        stream.write(",".join(self.COLUMNS) + "\n")
-        rows = list(map(",".join, zip(*fields, strict=True)))
-        for start in range(0, len(rows), 1024):  # a few large writes, not one per row
-            stream.write("".join(row + "\n" for row in rows[start : start + 1024]))
+        write_rows(stream, self.COLUMNS, self.columns().values())
 
     def document(self) -> dict[str, Any]:
         """The JSON document as Python data (strict JSON: inf as "inf", NaN as null)."""

@@ -56,7 +56,7 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 
 from . import metrics
-from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
+from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
 
 if TYPE_CHECKING:
     import pandas
@@ -720,7 +720,7 @@ def read_sources(audit: Audit, indices: Sequence[int]) -> SourceTexts:
     noted in ``problems`` with the reason.
     """
     from . import xmlpatch
-    from .loader import read_file
+    from .read.paths import read_file
 
     paths = {f.name: f.path for f in audit.files}
     unreadable: dict[str, str] = {}

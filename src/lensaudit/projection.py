@@ -10,7 +10,7 @@ output of liblensfun's ``Modifier``) are read from inside the valid domain.
 Two kinds of model make a :class:`RadialCamera`:
 
 * a Lensfun calibration (:func:`lensfun_camera`, from a
-  :class:`~lensaudit.loader.DistortionEntry` or raw coefficients), placed on
+  :class:`~lensaudit.read.records.DistortionEntry` or raw coefficients), placed on
   an image exactly as liblensfun 0.3.x does it (see below);
 * OpenCV's Brown-Conrady model (:func:`opencv_camera`): a camera matrix and
   the radial coefficients k1, k2, k3. The tangential coefficients p1, p2 are
@@ -43,17 +43,14 @@ liblensfun's conventions, as measured through lensfunpy's ``Modifier``
 from __future__ import annotations
 
 import math
-import os
-from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import normalizer
-from .loader import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
 from .metrics import HALF_DIAGONAL_MM, cubic_r_max
+from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -255,9 +252,9 @@ def lensfun_camera(
     ``crop_factor`` is the camera's (default: the calibration's); pixels and
     r_max then follow liblensfun's placement (module docstring), so that
     :func:`undistortion_map` matches ``lensfunpy.Modifier`` for the same lens,
-    crop factor and image size. ``real_focal`` (mm) overrides the entry's;
-    see :func:`real_focal_from_xml` for databases that give it as a separate
-    ``<real-focal-length>`` element. Raises :class:`ProjectionError` for an
+    crop factor and image size. ``real_focal`` (mm) overrides the entry's
+    (which the reader takes from the ``real-focal`` attribute, else from the
+    ``<real-focal-length>`` of its focal length). Raises :class:`ProjectionError` for an
     entry that is not usable or an image smaller than 2 x 2 pixels.
     """
     calibration = lens
@@ -509,7 +506,7 @@ def valid_region_mask(
 ) -> BoolArray:
     """Which pixels of an undistorted output image are read from inside the valid domain.
 
-    ``lens`` is a :class:`~lensaudit.loader.DistortionEntry` or
+    ``lens`` is a :class:`~lensaudit.read.records.DistortionEntry` or
     :class:`LensfunCalibration` (placed on the ``width`` x ``height`` image
     as liblensfun does, with the camera ``crop_factor``), or a
     :class:`RadialCamera` (its own centre and focal; width and height default
@@ -621,52 +618,3 @@ def _output_pinhole(
     x = (np.asarray(xs, dtype=np.float64) - camera.cx) / (camera.fx * scale)
     y = (np.asarray(ys, dtype=np.float64) - camera.cy) / (camera.fy * scale)
     return x, y
-
-
-def real_focal_from_xml(path: str | os.PathLike[str], line: int) -> float:
-    """The real focal length (mm) liblensfun uses for the ``<distortion>`` at ``line``.
-
-    Lensfun databases give it as the ``real-focal`` attribute of the
-    ``<distortion>`` element, or (version 1 files) as a
-    ``<real-focal-length focal= real-focal=>`` element of the same
-    ``<calibration>`` at the same focal length. NaN when neither is there.
-    """
-    from lxml import etree
-
-    from .loader import make_parser, parse_number
-
-    try:
-        root = etree.fromstring(Path(path).read_bytes(), make_parser())
-    except (OSError, etree.XMLSyntaxError):
-        return math.nan
-    element = next((e for e in root.iter("distortion") if e.sourceline == line), None)
-    if element is None:
-        return math.nan
-    candidates: Iterable[str | None] = [element.get("real-focal")]
-    calibration = element.getparent()
-    if calibration is not None:
-        candidates = [
-            *candidates,
-            *(
-                item.get("real-focal")
-                for item in calibration.iterchildren("real-focal-length")
-                if _same_number(item.get("focal"), element.get("focal"))
-            ),
-        ]
-    for text in candidates:
-        if text is None:
-            continue
-        try:
-            value = parse_number(text)
-        except ValueError:
-            continue
-        if value > 0:
-            return value
-    return math.nan
-
-
-def _same_number(first: str | None, second: str | None) -> bool:
-    try:
-        return float(first) == float(second)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return False

@@ -4,10 +4,10 @@ An XML library that parses and serializes a file rewrites it: quotes,
 attribute order, whitespace, comments and the declaration may all change,
 and a one-number fix turns into a diff of the whole file. This module works
 on the bytes instead. It finds an element's start tag by the line on which
-the tag ends (the line libxml2, and so the loader, reports for an element)
-and by its attribute values, and replaces only the text between the quotes
-of the attributes that change. Everything else, the quote style included,
-stays as it was.
+the tag ends (the line :mod:`lensaudit.read` gives an element: libxml2's,
+with CR LF, CR and LF each ending one line) and by its attribute values,
+and replaces only the text between the quotes of the attributes that
+change. Everything else, the quote style included, stays as it was.
 
 Comments, CDATA sections, processing instructions and the document type
 declaration are skipped when looking for start tags, so that a commented-out
@@ -48,8 +48,9 @@ class StartTag:
     """A start tag (or empty-element tag) found in a file's bytes.
 
     ``line`` is the 1-based line on which the tag ends (its ``>``), counted
-    in line feeds as libxml2 counts them. ``attributes_end`` is the offset
-    just after the last attribute, where a new attribute can go.
+    as the reader counts lines: CR LF, CR and LF each end one.
+    ``attributes_end`` is the offset just after the last attribute, where a
+    new attribute can go.
     """
 
     tag: str
@@ -83,7 +84,9 @@ def start_tags(data: bytes, tag: str) -> Iterator[StartTag]:
     opening = b"<" + tag.encode("ascii")
     position = 0
     line = 1
-    counted = 0  # offset up to which line feeds have been counted
+    counted = 0  # offset up to which line ends have been counted
+    # A CR LF pair never straddles the offsets counted up to: each is at a "<" or after a ">".
+    carriage_returns = b"\r" in data
     while True:
         found = data.find(b"<", position)
         if found < 0:
@@ -116,13 +119,21 @@ def start_tags(data: bytes, tag: str) -> Iterator[StartTag]:
             )
             cursor = match.end()
         end = _TAG_END.match(data, cursor)
-        line += data.count(b"\n", counted, found)
+        line += _line_ends(data, counted, found, carriage_returns)
         if end is None:
             raise PatchError(f"line {line}: <{tag}> start tag is not well formed")
-        line += data.count(b"\n", found, end.end())
+        line += _line_ends(data, found, end.end(), carriage_returns)
         counted = end.end()
         yield StartTag(tag, found, end.end(), line, attributes, cursor)
         position = end.end()
+
+
+def _line_ends(data: bytes, start: int, end: int, carriage_returns: bool) -> int:
+    """Line ends in ``data[start:end]``: CR LF, CR and LF count one each."""
+    count = data.count(b"\n", start, end)
+    if carriage_returns:
+        count += data.count(b"\r", start, end) - data.count(b"\r\n", start, end)
+    return count
 
 
 def _skipped_region_end(data: bytes, position: int) -> int | None:

@@ -51,15 +51,15 @@ for a directory baseline), the findings in that file are not counted as new,
 and the notice says that too.
 
 The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
-checked and the baseline's), :mod:`~lensaudit.check.parsing` (one parse per
-file, in worker processes while numpy imports), :mod:`~lensaudit.check.findings` and
-:mod:`~lensaudit.check.duplicates` (the rules),
-:mod:`~lensaudit.check.matching` (what the baseline already has) and
+checked and the baseline's), :mod:`~lensaudit.check.parsing` (each file
+read once by :mod:`lensaudit.read`, the one reader every command uses),
+:mod:`~lensaudit.check.findings` and :mod:`~lensaudit.check.duplicates` (the
+rules), :mod:`~lensaudit.check.matching` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
-:mod:`lensaudit.check_formats`. With ``cache=True``, what parsing and the
-rules make of each file is kept by the content of its bytes
-(:mod:`~lensaudit.check.cache`) and reused for the same bytes, in the
-database or in a baseline.
+:mod:`lensaudit.check_formats`. With ``cache=True``, the reader's tables of
+each file are kept by the content of its bytes (:class:`lensaudit.read.Cache`,
+shared with every other command) and reused for the same bytes, in the
+database or in a baseline; the findings are worked out again every time.
 """
 
 from __future__ import annotations
@@ -67,10 +67,9 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
-from .. import database
-from .findings import analyse, analyse_parsed, fix_suggestion, prepare
+from .. import read as reader
+from .findings import analyse, analyse_parsed, fix_suggestion
 from .inputs import (
     HISTORY_DEPTH,
     GitOrigin,
@@ -113,9 +112,6 @@ from .result import (
     describe,
     entry_key,
 )
-
-if TYPE_CHECKING:
-    from .cache import CheckCache
 
 #: :func:`fix_suggestion`, by the private name some callers use.
 _fix_suggestion = fix_suggestion
@@ -178,54 +174,45 @@ def check(
     is an existing directory or file, or else a git revision of the
     repository holding the paths. ``margin`` (>= 1) is the r_normalized
     below which a fold outside the image is a warning; ``verbose`` adds the
-    notices about folds. With ``cache``, what an earlier check made of files
-    with the same bytes is reused, and what this one makes is kept (see
-    :mod:`lensaudit.check.cache`); the result is the same either way. Raises
-    :class:`lensaudit.loader.LoadError`
-    (:class:`CheckError` included) when the input or the baseline cannot be
-    read at all.
+    notices about folds. With ``cache``, the reader's tables of files with
+    the same bytes as in an earlier run are reused, and those read now kept
+    (:class:`lensaudit.read.Cache`); the result is the same either way.
+    Raises :class:`lensaudit.read.LoadError` (:class:`CheckError` included)
+    when the input or the baseline cannot be read at all.
     """
     if not margin >= 1 or math.isinf(margin):
         raise CheckError(f"margin {margin} must be a finite number >= 1")
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
-    # resolve() maps a Lensfun checkout to its data/db (database.database_directory),
+    # resolve() maps a Lensfun checkout to its data/db (read.paths.database_directory),
     # for the baseline too, which is read at the same paths.
-    source = database.resolve(list(paths) if paths else None)
+    source = reader.resolve(list(paths) if paths else None)
     sources = sources_from_paths(source.paths)
     if all(s.data is None for s in sources):
         raise CheckError(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
-    store = None
-    if cache:
-        from .cache import CheckCache
-
-        store = CheckCache()
-    try:
-        return _check(source, sources, baseline, margin, verbose, store)
-    finally:
-        if store is not None:
-            store.save()
+    store = reader.Cache() if cache else None  # one for the database and its baseline
+    return _check(source, sources, baseline, margin, verbose, store)
 
 
 def _check(
-    source: database.DatabaseSource,
+    source: reader.DatabaseSource,
     sources: list[Source],
     baseline: str | os.PathLike[str] | None,
     margin: float,
     verbose: bool,
-    cache: CheckCache | None,
+    cache: reader.Cache | None,
 ) -> CheckResult:
     # inputs -> parsing -> findings (-> matching, with a baseline) -> CheckResult
-    read = parse_sources(sources, meanwhile=prepare, cache=cache)
-    files, current = analyse_parsed(read, margin, verbose, cache)
+    read = parse_sources(sources, cache)
+    files, current = analyse_parsed(read, margin, verbose)
     if baseline is None:
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
-    before_read = parse_sources(baseline_sources(label, source.paths), cache=cache)
-    before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH)
-    _, before = analyse_parsed(before_read, margin, verbose, cache)
+    before_read = parse_sources(baseline_sources(label, source.paths), cache)
+    before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
+    _, before = analyse_parsed(before_read, margin, verbose)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)
     if notices:

@@ -1,15 +1,20 @@
 """Duplicates: a lens defined twice, and two ``<distortion>`` entries for one
 focal length of a calibration. Errors, or warnings when the two are
-identical, since liblensfun then loses nothing by keeping one of them."""
+identical, since liblensfun then loses nothing by keeping one of them.
+
+What a lens is made of comes from the reader: its elements other than its
+untranslated names and its calibrations (:attr:`lensaudit.read.records.Lens.content`),
+and its own distortion entries' values (:func:`lens_contents`).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
-from .. import loader
+from ..read.records import DistortionEntry
 from .matching import entry_content, lens_identity
-from .parsing import LensRecord, ParsedSource, element_content, lens_elements
+from .parsing import LensRecord, ParsedSource
 from .result import (
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
@@ -34,9 +39,9 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
     finding is an error, or a warning when the two entries are identical.
     """
     for index, file in enumerate(read):
-        if file.problem is not None or file.lens_of_entry is None:
+        if file.problem is not None:
             continue
-        first: dict[tuple, loader.DistortionEntry] = {}
+        first: dict[tuple, DistortionEntry] = {}
         for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
             if lens is None or entry.focal != entry.focal:
                 continue
@@ -87,17 +92,13 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
     case and spacing of their names.
     """
     first: dict[tuple, tuple[ParsedSource, LensRecord]] = {}
-    # Contents for duplicates only, from their files parsed again: they are rare.
-    elements: dict[int, list] = {}  # the <lens> elements of a file, by id(file)
-    contents: dict[int, tuple] = {}  # a lens's content, by id(lens)
+    # Contents for duplicates only: they are rare.
+    contents: dict[int, list[tuple]] = {}  # the contents of a file's lenses, by id(file)
 
     def content_of(file: ParsedSource, lens: LensRecord) -> tuple:
-        if id(lens) not in contents:
-            if id(file) not in elements:
-                elements[id(file)] = lens_elements(file.source)
-            element = elements[id(file)][lens.index]
-            contents[id(lens)] = element_content(element, skip_names=True)
-        return contents[id(lens)]
+        if id(file) not in contents:
+            contents[id(file)] = lens_contents(file)
+        return contents[id(file)][lens.index]
 
     for index, file in enumerate(read):
         if file.problem is not None:
@@ -148,3 +149,26 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
             keys = ((*pair, key), pair, (severity, DUPLICATE_LENS, key))
             names = (file.source.file_name, earlier_file.source.file_name)
             yield index, Identified(finding, keys, names)
+
+
+def lens_contents(file: ParsedSource) -> list[tuple]:
+    """What each lens of a file is made of, in order: its elements other than
+    its untranslated names and its calibrations, the values of its own
+    distortion entries (:func:`~lensaudit.check.matching.entry_content`:
+    without names or lines), and those of its vignetting and TCA entries
+    (without their lines and names), each in document order."""
+    tables = file.tables
+    entries: list[list[tuple]] = [[] for _ in file.lenses]
+    for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
+        if lens is not None:
+            entries[lens].append(entry_content(entry))
+    calibrations: list[list[tuple]] = [[] for _ in file.lenses]
+    for rows, lenses in ((tables.vignetting, tables.lens_of_vignetting),
+                         (tables.tca, tables.lens_of_tca)):  # fmt: skip
+        for row, lens in zip(rows or (), lenses or (), strict=True):
+            if lens is not None:
+                calibrations[lens].append(row[3:])  # without line, maker and lens
+    return [
+        (lens.content, tuple(own), tuple(more))
+        for lens, own, more in zip(file.lenses, entries, calibrations, strict=True)
+    ]

@@ -11,9 +11,19 @@ import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from .. import calibrations, loader
+from .. import calibrations
+from ..read.records import (
+    STATUS_BAD_VALUE,
+    STATUS_MISSING_ATTRIBUTE,
+    STATUS_NO_LENS,
+    STATUS_NOT_DATABASE,
+    STATUS_OK,
+    STATUS_UNKNOWN_MODEL,
+    STATUS_UNREADABLE,
+    DistortionEntry,
+)
+from ..read.tables import TCA, VIGNETTING
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .matching import calibration_content, entry_content, file_identified, lens_identity
@@ -42,16 +52,13 @@ from .result import (
     entry_key,
 )
 
-if TYPE_CHECKING:
-    from .cache import CheckCache
-
 _STATUS_CODES = {
-    loader.STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
-    loader.STATUS_BAD_VALUE: BAD_VALUE,
-    loader.STATUS_UNKNOWN_MODEL: UNKNOWN_MODEL,
-    loader.STATUS_NO_LENS: NO_LENS,
-    loader.STATUS_UNREADABLE: UNREADABLE,
-    loader.STATUS_NOT_DATABASE: NOT_A_DATABASE,
+    STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
+    STATUS_BAD_VALUE: BAD_VALUE,
+    STATUS_UNKNOWN_MODEL: UNKNOWN_MODEL,
+    STATUS_NO_LENS: NO_LENS,
+    STATUS_UNREADABLE: UNREADABLE,
+    STATUS_NOT_DATABASE: NOT_A_DATABASE,
 }
 
 
@@ -60,27 +67,13 @@ def analyse(
 ) -> tuple[list[CheckedFile], list[Identified]]:
     """Files and findings of one database, each finding with what matches it
     against a baseline's (see :class:`Identified`)."""
-    return analyse_parsed(parse_sources(sources, prepare), margin, verbose)
-
-
-def prepare() -> None:
-    """Import what the rules need, numpy and the audits: what the check does
-    while its files are parsed."""
-    from .. import pipeline, tca, vignetting  # noqa: F401  (the imports are the point)
+    return analyse_parsed(parse_sources(sources), margin, verbose)
 
 
 def analyse_parsed(
-    read: Sequence[ParsedSource],
-    margin: float,
-    verbose: bool,
-    cache: CheckCache | None = None,
+    read: Sequence[ParsedSource], margin: float, verbose: bool
 ) -> tuple[list[CheckedFile], list[Identified]]:
-    """:func:`analyse` of files already parsed; findings in file and line order.
-
-    With a ``cache``, the findings of a file whose content it has met under
-    the same ``margin`` and ``verbose`` are taken from it, and the others kept
-    in it.
-    """
+    """:func:`analyse` of files already parsed; findings in file and line order."""
     files = [
         CheckedFile(
             f.source.display, f.source.path, f.count, f.problem.message if f.problem else ""
@@ -97,7 +90,7 @@ def analyse_parsed(
             add(index, file_identified(file))
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
-    for index, items in enumerate(file_findings(read, margin, verbose, cache)):
+    for index, items in enumerate(file_findings(read, margin, verbose)):
         for item in items:
             add(index, item)
     for index, item in duplicate_lenses(read):
@@ -107,47 +100,19 @@ def analyse_parsed(
 
 
 def file_findings(
-    read: Sequence[ParsedSource],
-    margin: float,
-    verbose: bool,
-    cache: CheckCache | None = None,
+    read: Sequence[ParsedSource], margin: float, verbose: bool
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records and duplicate focal lengths (none for a file
-    with a file-level problem), from the ``cache`` where it has them."""
-    setting = f"{margin!r} {verbose:d}"
-    found: list[list[Identified] | None] = [
-        [] if file.problem is not None else None for file in read
-    ]
-    if cache is not None:
-        for index, file in enumerate(read):
-            if found[index] is None and file.digest:
-                stored = cache.findings(file.digest, setting)
-                if stored is not None:
-                    found[index] = _rebuilt(stored, file)
-    todo = [index for index, items in enumerate(found) if items is None]
-    computed = _own_findings([read[index] for index in todo], margin, verbose)
-    for index, items in zip(todo, computed, strict=True):
-        found[index] = items
-        file = read[index]
-        if cache is not None and file.digest:
-            stored = _storable(items, file)
-            if stored is not None:
-                cache.put_findings(file.digest, setting, stored)
-    return [items or [] for items in found]
-
-
-def _own_findings(
-    read: Sequence[ParsedSource], margin: float, verbose: bool
-) -> list[list[Identified]]:
-    """:func:`file_findings` worked out, for files without a file-level problem."""
+    with a file-level problem)."""
     found: list[list[Identified]] = [[] for _ in read]
-    if not read:
+    parsed = [index for index, file in enumerate(read) if file.problem is None]
+    if not parsed:
         return found  # numpy and the audits are not needed
-    entries = [(index, entry) for index, file in enumerate(read) for entry in file.entries]
+    entries = [(index, entry) for index in parsed for entry in read[index].entries]
     metrics = _metrics([entry for _, entry in entries])
     for position, (index, entry) in enumerate(entries):
-        if entry.status != loader.STATUS_OK:
+        if entry.status != STATUS_OK:
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
             finding = entry_finding(SEVERITY_ERROR, code, entry, entry.message)
         else:
@@ -168,69 +133,6 @@ def _own_findings(
     return found
 
 
-def _storable(items: list[Identified], file: ParsedSource) -> list | None:
-    """A file's own findings as plain data without its name, or None if one of
-    them names another file (then they are not kept)."""
-    display, name = file.source.display, file.source.file_name
-    stored = []
-    for finding, keys, names in items:
-        if (
-            finding.file != display
-            or finding.known
-            or names != (name,)
-            or any(other != display for other, _ in finding.related)
-        ):
-            return None
-        stored.append(
-            (
-                finding.severity,
-                finding.code,
-                finding.line,
-                finding.column,
-                finding.message,
-                finding.entry_key,
-                tuple(line for _, line in finding.related),
-                keys,
-            )
-        )
-    return stored
-
-
-def _rebuilt(stored: list, file: ParsedSource) -> list[Identified] | None:
-    """A file's own findings from what :func:`_storable` made of them, or None
-    if they do not have its shape."""
-    display, names = file.source.display, (file.source.file_name,)
-    rebuilt = []
-    for item in stored:
-        if not (isinstance(item, tuple) and len(item) == 8):
-            return None
-        severity, code, line, column, message, entry_key, related, keys = item
-        if not (
-            isinstance(severity, str)
-            and isinstance(code, str)
-            and isinstance(line, int)
-            and isinstance(column, int)
-            and isinstance(message, str)
-            and isinstance(entry_key, tuple)
-            and isinstance(related, tuple)
-            and all(isinstance(other, int) for other in related)
-            and isinstance(keys, tuple)
-        ):
-            return None
-        finding = Finding(
-            severity,
-            code,
-            display,
-            line,
-            column,
-            message,
-            entry_key,
-            related=tuple((display, other) for other in related),
-        )
-        rebuilt.append(Identified(finding, keys, names))
-    return rebuilt
-
-
 @dataclass(frozen=True)
 class _EntryMetrics:
     r_max: float
@@ -240,14 +142,14 @@ class _EntryMetrics:
     problem: str = ""
 
 
-def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
+def _metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]:
     """r_max and the rest for each entry, None where r_max is infinite; entry by
     entry if the batch fails."""
     import numpy as np
 
     from ..pipeline import audit_entries
 
-    def batch(chunk: list[loader.DistortionEntry]) -> list[_EntryMetrics | None]:
+    def batch(chunk: list[DistortionEntry]) -> list[_EntryMetrics | None]:
         with np.errstate(all="ignore"):  # a bad entry is a finding, not a warning
             m = audit_entries(chunk).metrics
         values = zip(
@@ -275,7 +177,7 @@ def _metrics(entries: list[loader.DistortionEntry]) -> list[_EntryMetrics | None
 
 
 def _fold_finding(
-    entry: loader.DistortionEntry, m: _EntryMetrics, margin: float, verbose: bool
+    entry: DistortionEntry, m: _EntryMetrics, margin: float, verbose: bool
 ) -> Finding | None:
     if m.problem or m.r_max != m.r_max:
         reason = m.problem or "the solver returned no value"
@@ -323,7 +225,7 @@ def _fold_finding(
     return None
 
 
-def fix_suggestion(entry: loader.DistortionEntry) -> str:
+def fix_suggestion(entry: DistortionEntry) -> str:
     """The ``lensaudit fix`` command that refits this entry, on the same database.
 
     The lens name goes in double quotes (single-quoted text is what messages
@@ -347,7 +249,7 @@ def calibration_findings(
 
     shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
     parsed = [(index, file) for index, file in enumerate(read) if file.problem is None]
-    for kind, module in ((calibrations.VIGNETTING, vignetting), (calibrations.TCA, tca)):
+    for kind, module in ((VIGNETTING, vignetting), (TCA, tca)):
         parts = [file.calibrations[kind] for _, file in parsed if kind in file.calibrations]
         records = calibrations.CalibrationRecords.joined(kind, parts)
         if not records:
@@ -360,7 +262,7 @@ def calibration_findings(
         severities = audit.metrics["severity"].tolist()
         # Entry objects only for the records with a finding: a database has tens of thousands.
         for position, status in enumerate(records.column("status")):
-            if status == loader.STATUS_OK:
+            if status == STATUS_OK:
                 if severities[position] not in shown:
                     continue
             elif status not in calibrations.STATUS_CODES:
@@ -386,7 +288,7 @@ def calibration_findings(
 def _calibration_record(audit: calibrations.CalibrationAudit, position: int) -> dict:
     """One entry of a vignetting or TCA audit as the dict its ``records()`` gives."""
     entry = audit.entries[position]
-    ok = entry.status == loader.STATUS_OK
+    ok = entry.status == STATUS_OK
     record = {}
     for name in audit.COLUMNS:
         if name not in audit.METRIC_COLUMNS:

@@ -1,8 +1,9 @@
 """The first stage of a check: what is checked and what it is compared with.
 
-The database's files are read from disk into :class:`Source` records; a
-baseline is a directory, or a git revision read with ``git ls-tree`` and
-``git cat-file`` (:mod:`lensaudit.git`), so that the work tree is never
+The database's files are found and read from disk into :class:`Source`
+records by :mod:`lensaudit.read.paths`, as ``lensaudit scan`` finds and reads
+them; a baseline is a directory, or a git revision read with ``git ls-tree``
+and ``git cat-file`` (:mod:`lensaudit.git`), so that the work tree is never
 touched.
 """
 
@@ -14,7 +15,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .. import git as gitlayer
-from .. import loader
+from .. import read as reader
+from ..read.paths import display_path, expand, read_file, reason
+from ..read.records import STATUS_OK, LoadError
 from .result import CheckError
 
 #: How many commits that changed a file are searched for a version that parses,
@@ -57,41 +60,31 @@ class Source:
 def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
     """The XML files that directories and files designate, read into memory.
 
-    Files of a directory (``*.xml`` directly inside it) are named relative to
-    it. Raises :class:`CheckError` for a path that does not exist and a
-    directory without XML files; a file that cannot be read becomes a
-    :class:`Source` without data.
+    The files are those ``lensaudit scan`` reads (:func:`lensaudit.read.paths.expand`):
+    ``*.xml`` directly inside a directory, named relative to it and shown
+    under the directory as given, and files given directly, named as given.
+    Raises :class:`CheckError` for a path that does not exist, is neither a
+    file nor a directory, or is a directory without XML files; a file that
+    cannot be read becomes a :class:`Source` without data.
     """
     sources: list[Source] = []
     seen: set[Path] = set()
     for given in map(Path, paths):
-        if given.is_dir():
-            try:
-                files = loader.xml_files(given)
-            except OSError as error:
-                raise CheckError(
-                    f"{given}: cannot list directory: {error.strerror or error}"
-                ) from None
-            if not files:
-                raise CheckError(
-                    f"{given}: directory holds no *.xml files "
-                    f"(a Lensfun database is a directory of XML files)"
-                )
-            targets = [(file, file.name, loader.display_path(file)) for file in files]
-        elif given.exists():
-            targets = [(given, str(given), loader.display_path(given))]
-        else:
-            raise CheckError(f"{given}: no such file or directory")
-        for file, name, display in targets:
-            resolved = file.resolve()
-            if resolved in seen:
+        try:
+            targets = expand([given])
+        except LoadError as error:
+            raise CheckError(str(error)) from None
+        directory = Path(display_path(given)) if given.is_dir() else None
+        for path, name in targets:
+            if path in seen:  # the same file named twice is read once
                 continue
-            seen.add(resolved)
+            seen.add(path)
+            display = name if directory is None else str(directory / name)
             try:
-                data, error = loader.read_regular_file(file), ""
+                data, error = read_file(path), ""
             except OSError as os_error:
-                data, error = None, f"cannot read file: {os_error.strerror or os_error}"
-            sources.append(Source(name, display, resolved, data, error))
+                data, error = None, f"cannot read file: {reason(os_error)}"
+            sources.append(Source(name, display, path, data, error))
     return sources
 
 
@@ -177,11 +170,12 @@ def _cat_file(objects: list[bytes], repository: Path) -> list[bytes | None]:
     ]
 
 
-def last_readable(source: Source, depth: int = HISTORY_DEPTH) -> tuple[Source, str] | None:
-    """The newest version of a git baseline's file that parses, among the last
-    ``depth`` commits that changed it, and that commit's id."""
-    from lxml import etree
-
+def last_readable(
+    source: Source, depth: int = HISTORY_DEPTH, cache: reader.Cache | None = None
+) -> tuple[Source, str] | None:
+    """The newest version of a git baseline's file that the reader reads as a
+    database (status ``ok``), among the last ``depth`` commits that changed
+    it, and that commit's id. What is read is kept in ``cache``, if given."""
     origin = source.origin
     if origin is None:
         return None
@@ -195,11 +189,7 @@ def last_readable(source: Source, depth: int = HISTORY_DEPTH) -> tuple[Source, s
         if data is None or data in tried:
             continue
         tried.add(data)
-        try:
-            root = etree.fromstring(data, loader.make_parser())
-        except etree.XMLSyntaxError:
-            continue
-        if etree.QName(root).localname != loader.DATABASE_ROOT:
-            continue
-        return replace(source, data=data, origin=replace(origin, commit=commit)), commit
+        tables = reader.read_bytes(data, source.display, cache=cache, calibrations=True)
+        if tables.status == STATUS_OK:
+            return replace(source, data=data, origin=replace(origin, commit=commit)), commit
     return None

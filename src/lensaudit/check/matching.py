@@ -12,9 +12,10 @@ import re
 from collections.abc import Hashable, Sequence
 from dataclasses import fields, replace
 
-from .. import loader
+from .. import read as reader
+from ..read.records import STATUS_OK, DistortionEntry
 from .inputs import last_readable
-from .parsing import ParsedSource, parse_source
+from .parsing import ParsedSource, parse_sources
 from .result import (
     BASELINE_UNREADABLE,
     FILE_CODES,
@@ -40,9 +41,9 @@ def lens_identity(maker: str, model: str) -> tuple[str, str]:
 _LINE_NUMBER = re.compile(r"\bline \d+")
 
 
-def entry_content(entry: loader.DistortionEntry) -> tuple:
+def entry_content(entry: DistortionEntry) -> tuple:
     """An entry's own values, without its lens's name, file or line."""
-    message = "" if entry.status == loader.STATUS_OK else _LINE_NUMBER.sub("line", entry.message)
+    message = "" if entry.status == STATUS_OK else _LINE_NUMBER.sub("line", entry.message)
     return (
         entry.model,
         entry.type,
@@ -84,11 +85,11 @@ def file_identified(file: ParsedSource) -> Identified:
 
 
 def readable_baseline(
-    read: list[ParsedSource], depth: int
+    read: list[ParsedSource], depth: int, cache: reader.Cache | None = None
 ) -> tuple[list[ParsedSource], list[Identified], list[tuple[str, str]], set[str]]:
     """The baseline's files with each one that cannot be parsed replaced by its
     last readable version from git, among the last ``depth`` commits that
-    changed it.
+    changed it (read through ``cache``, if given).
 
     Also returns the file-level findings of the replaced files (the baseline
     had them, whatever the older version holds), the (name, commit) of each
@@ -101,12 +102,12 @@ def readable_baseline(
     for index, file in enumerate(read):
         if file.problem is None:
             continue
-        older = last_readable(file.source, depth)
+        older = last_readable(file.source, depth, cache)
         if older is None:
             incomparable.add(file.source.file_name)
             continue
         kept.append(file_identified(file))
-        read[index] = parse_source(older[0])
+        read[index] = parse_sources([older[0]], cache)[0]
         replaced.append((file.source.file_name, older[1]))
     return read, kept, replaced, incomparable
 

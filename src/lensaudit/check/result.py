@@ -10,8 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
-from .. import loader
-from ..loader import LoadError
+from ..read.records import DEFAULT_LENS_TYPE, DistortionEntry, LoadError
 
 SEVERITY_ERROR = "error"
 SEVERITY_WARNING = "warning"
@@ -197,7 +196,7 @@ def lens_name(maker: str, lens: str) -> str:
     return clip(name, NAME_LIMIT) or "unnamed lens"
 
 
-def entry_key(entry: loader.DistortionEntry) -> tuple:
+def entry_key(entry: DistortionEntry) -> tuple:
     """(maker, lens, crop factor, model, focal): how an entry is named in
     output. NaN values are None."""
     return (
@@ -209,7 +208,7 @@ def entry_key(entry: loader.DistortionEntry) -> tuple:
     )
 
 
-def describe(entry: loader.DistortionEntry) -> str:
+def describe(entry: DistortionEntry) -> str:
     """Short name of an entry: lens, model, focal and crop factor, as far as known."""
     name = lens_name(entry.maker, entry.lens)
     details = []
@@ -219,12 +218,12 @@ def describe(entry: loader.DistortionEntry) -> str:
         details.append(f"{entry.focal:g} mm")
     if entry.crop_factor == entry.crop_factor:
         details.append(f"crop {entry.crop_factor:g}")
-    if entry.type and entry.type != loader.DEFAULT_LENS_TYPE:
+    if entry.type and entry.type != DEFAULT_LENS_TYPE:
         details.append(clip(entry.type, 20))
     return f"{name} ({', '.join(details)})" if details else name
 
 
-def entry_finding(severity: str, code: str, entry: loader.DistortionEntry, text: str) -> Finding:
+def entry_finding(severity: str, code: str, entry: DistortionEntry, text: str) -> Finding:
     """A finding about one distortion entry, ``text`` led by :func:`describe`."""
     return Finding(
         severity,

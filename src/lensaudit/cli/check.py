@@ -102,8 +102,9 @@ def check(
     ls-tree and git cat-file; the work tree is not touched. A baseline file
     that cannot be parsed is replaced by its last version in git that can.
 
-    With --cache (the default), what an earlier check made of a file with the
-    same bytes (the baseline's files too) is reused; the output is the same.
+    With --cache (the default), a file whose bytes an earlier run of any
+    command read (the baseline's files too) is not parsed again; the output
+    is the same.
 
     \b
     Exit status:
@@ -139,7 +140,7 @@ def _run(
     """The check's result, its paths as ``output_format`` shows them."""
     from ..check import CheckError
     from ..check import check as run_check
-    from ..loader import LoadError
+    from ..read import LoadError
 
     try:
         result = run_check(

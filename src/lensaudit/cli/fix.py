@@ -112,8 +112,8 @@ def fix(
       0  done (whether or not every entry could be fixed)
       2  bad usage, or input that could not be read or patched
     """
-    from ..loader import LoadError
     from ..pipeline import run
+    from ..read import LoadError
 
     _check_options(target, margin, tolerance)
     try:
@@ -290,22 +290,12 @@ def _write_table(
         stream.write("\n" + diff)
 
 
-def _csv_field(value: Any) -> str:
-    from ..formats.csv_format import text_column
-    from ..pipeline import format_float
-
-    if isinstance(value, float):
-        return format_float(value)
-    return text_column([value])[0]
-
-
 def _write_csv(results: list[FixResult], stream: TextIO) -> None:
     from ..fix import RECORD_COLUMNS
+    from ..formats.csv_format import write_rows
 
-    stream.write(",".join(RECORD_COLUMNS) + "\n")
-    for result in results:
-        record = result.record()
-        stream.write(",".join(_csv_field(record[name]) for name in RECORD_COLUMNS) + "\n")
+    records = [result.record() for result in results]
+    write_rows(stream, RECORD_COLUMNS, ([r[name] for r in records] for name in RECORD_COLUMNS))
 
 
 def _json_value(value: Any) -> Any:

@@ -9,8 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from .options import EXIT_INPUT_ERROR, fail
-from .scan import cache_option
+from .options import EXIT_INPUT_ERROR, cache_option, fail
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -64,8 +63,8 @@ def _check_format(output: Path) -> str:
 
 
 def _audit(paths: list[Path] | None, cache: bool) -> Audit:
-    from ..loader import LoadError
     from ..pipeline import run
+    from ..read import LoadError
 
     try:
         return run(paths or None, cache=cache)

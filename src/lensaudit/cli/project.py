@@ -21,10 +21,8 @@ from .options import fail, output_file, output_stream
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..loader import DistortionEntry
     from ..projection import RadialCamera
-
-_BOOLEAN = {True: "true", False: "false"}
+    from ..read import DistortionEntry
 
 
 @click.command()
@@ -203,39 +201,38 @@ def _lensfun_camera(
     crop: float | None,
     real_focal: float | None,
 ) -> RadialCamera:
-    from ..projection import lensfun_camera, real_focal_from_xml
+    from ..projection import lensfun_camera
 
     if entry:
-        found, path = _entry_at(entry)
+        found = _entry_at(entry)
     else:
         if focal is None:
             fail("--lens needs --focal MM (a focal length the lens is calibrated at)")
-        found, path = _entry_by_name(lens or "", focal, crop, databases)
-    if real_focal is None and path is not None:
-        real_focal = real_focal_from_xml(path, found.line)
+        found = _entry_by_name(lens or "", focal, crop, databases)
+    # Without --real-focal, the entry's own (its attribute, else <real-focal-length>).
     return lensfun_camera(found, width, height, crop, real_focal=real_focal)
 
 
-def _entry_at(text: str) -> tuple[DistortionEntry, Path]:
+def _entry_at(text: str) -> DistortionEntry:
     """The entry at FILE:LINE; a FILE that does not exist is looked for in the bundled database."""
-    from ..loader import STATUS_OK, LoadError, load
+    from .. import read
+    from ..read import LoadError
+    from ..read.records import STATUS_OK
 
     name, sep, line_text = text.rpartition(":")
     if not sep or not line_text.isdigit():
         fail(f"--entry {text!r}: expected FILE:LINE, e.g. slr-tokina.xml:17")
     path = Path(name)
     if not path.is_file():
-        from ..database import bundled_database_path
-
         try:
-            bundled = bundled_database_path() / name
+            bundled = read.paths.bundled_database_path() / name
         except LoadError:
             bundled = None
         if bundled is None or not bundled.is_file():
             fail(f"--entry {text!r}: no such file {name!r} (nor in the bundled database)")
         path = bundled
     line = int(line_text)
-    entries = load([path]).entries
+    entries = read.read([path]).entries()
     matches = [e for e in entries if e.line == line]
     if not matches:
         lines = ", ".join(str(e.line) for e in entries[:8] if e.line)
@@ -246,24 +243,23 @@ def _entry_at(text: str) -> tuple[DistortionEntry, Path]:
     found = matches[0]
     if found.status != STATUS_OK:
         fail(f"{name}:{line}: entry cannot be used ({found.status}: {found.message})")
-    return found, path
+    return found
 
 
 def _entry_by_name(
     text: str, focal: float, crop: float | None, databases: tuple[Path, ...]
-) -> tuple[DistortionEntry, Path | None]:
-    from ..database import resolve
-    from ..loader import STATUS_OK, LoadError, load
+) -> DistortionEntry:
+    from .. import read
+    from ..read import LoadError
+    from ..read.records import STATUS_OK
 
     try:
-        loaded = load(list(resolve(list(databases) or None).paths))
+        entries = read.read(list(databases) or None).entries()
     except LoadError as error:
         fail(str(error))
     needle = text.casefold()
     named = [
-        e
-        for e in loaded.entries
-        if e.status == STATUS_OK and needle in f"{e.maker} {e.lens}".casefold()
+        e for e in entries if e.status == STATUS_OK and needle in f"{e.maker} {e.lens}".casefold()
     ]
     if not named:
         fail(f"--lens {text!r}: no usable distortion entry of a lens with that name")
@@ -287,9 +283,7 @@ def _entry_by_name(
             f"--lens {text!r} at {focal:g} mm has {len(at_focal)} calibrations: {places}; "
             "choose one with --entry FILE:LINE"
         )
-    found = at_focal[0]
-    paths = {f.name: f.path for f in loaded.files}
-    return found, paths.get(found.file)
+    return at_focal[0]
 
 
 #: What a .npy file starts with (NumPy's format documentation).
@@ -313,7 +307,7 @@ def _read_points(path: Path | None) -> np.ndarray:
         name, data = "<stdin>", _read_stdin()
         is_npy = data.startswith(_NPY_MAGIC)
     else:
-        from ..loader import display_path
+        from ..read import display_path
 
         name = _shown(display_path(path))
         data = _read_file(path, name)
@@ -551,12 +545,9 @@ def _parse_npy(data: bytes, name: str) -> np.ndarray:
 
 
 def _write_pixels(pixels: np.ndarray, valid: np.ndarray, stream: TextIO) -> None:
-    us = ["" if text == "nan" else text for text in map(repr, pixels[:, 0].tolist())]
-    vs = ["" if text == "nan" else text for text in map(repr, pixels[:, 1].tolist())]
-    flags = [_BOOLEAN[v] for v in valid.tolist()]
-    out = csv.writer(stream, lineterminator="\n")
-    out.writerow(("u", "v", "valid"))
-    out.writerows(zip(us, vs, flags, strict=True))
+    from ..formats.csv_format import write_rows
+
+    write_rows(stream, ("u", "v", "valid"), (*pixels.T.tolist(), valid.tolist()))
 
 
 def _write_info(camera: RadialCamera, stream: TextIO) -> None:

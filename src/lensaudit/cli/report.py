@@ -6,8 +6,7 @@ from pathlib import Path
 
 import click
 
-from .options import database_paths, fail
-from .scan import cache_option
+from .options import cache_option, database_paths, fail
 
 
 @click.command()
@@ -52,9 +51,8 @@ def report(
 
     Existing report files in DIR are replaced only with --force.
     """
-    from ..loader import LoadError
-    from ..pipeline import run
-    from ..report import ReportExistsError, write_report
+    from ..read import LoadError
+    from ..report import ReportExistsError, audit, write_report
 
     values = None
     if paper:
@@ -65,19 +63,20 @@ def report(
         except PaperValuesError as error:
             fail(str(error))
     try:
-        # entries.csv is scan's CSV: its rows come from the cache when the files are unchanged.
-        audit = run(list(paths) or None, cache=cache, formats=("csv",))
+        # Read once, with the calibrations: every table and figure comes from this read.
+        audits = audit(list(paths) or None, cache=cache)
     except LoadError as error:
         fail(str(error))
-    if audit.files and all(f.error for f in audit.files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
+    files = audits.distortion.files
+    if files and all(f.error for f in files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
     try:
-        written = write_report(audit, output_dir, force=force, paper_values=values)
+        written = write_report(audits, output_dir, force=force, paper_values=values)
     except ReportExistsError as error:
         fail(str(error))
     except OSError as error:
         fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
-    summary = audit.summary
+    summary = audits.distortion.summary
     click.echo(
         f"{summary.entries} entries audited, {summary.total.finite} with a finite "
         f"r_max, {len(summary.folding)} folding inside their image."

@@ -17,6 +17,7 @@ from ..columns import (
     LEADING_COLUMNS,
     TAIL_NAMES,
     TRAILING_COLUMNS,
+    format_float,
     format_floats,
 )
 from . import interleaved, metric_fields
@@ -24,6 +25,7 @@ from . import interleaved, metric_fields
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
     from typing import TextIO
 
     from ..pipeline import Audit
@@ -43,6 +45,43 @@ def text_column(values: list) -> list[str]:
     if _NEEDS_QUOTES.search("\0".join(texts)):
         return [_quoted(text) for text in texts]
     return texts
+
+
+def write_rows(stream: TextIO, header: Sequence[str], columns: Iterable[Iterable]) -> None:
+    """Write a header line and the rows of ``columns`` (the values of each
+    column, all of one length) as CSV, each line ending in ``\\n``.
+
+    Values are written as this module writes them: floats in shortest
+    round-trip form, ``inf``, or empty for NaN; booleans ``true``/``false``;
+    None empty; ints as decimals; text quoted as RFC 4180 says. A column
+    of one kind costs one pass.
+    """
+    fields = []
+    for column in columns:
+        values = list(column)
+        kinds = set(map(type, values))
+        if kinds <= {float}:
+            fields.append(format_floats(values))
+        elif kinds <= {bool, type(None)}:
+            fields.append(list(map(_BOOLEAN.__getitem__, values)))
+        elif kinds <= {str, int}:
+            fields.append(text_column(values))
+        else:  # mixed: each value as its kind is written
+            fields.append(
+                text_column(
+                    [
+                        _BOOLEAN[v]
+                        if v is None or isinstance(v, bool)
+                        else format_float(float(v))
+                        if isinstance(v, float)
+                        else v
+                        for v in values
+                    ]
+                )
+            )
+    stream.write(",".join(text_column(list(header))) + "\n")
+    if fields:
+        stream.write(interleaved(["", *[","] * (len(fields) - 1), "\n"], fields))
 
 
 def _fields(name: str, values: list) -> list[str]:

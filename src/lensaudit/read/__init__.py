@@ -170,7 +170,7 @@ def _cached(
     try:
         tables = FileTables(name, path, digest, stored)  # type: ignore[arg-type]
         if calibrations:
-            tables.vignetting, tables.tca = stored_calibrations  # type: ignore[misc]
+            tables.set_calibrations(stored_calibrations)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         return None  # not what this code stores: parsed again
     return tables
@@ -189,7 +189,7 @@ def _made(
         digest = content_digest(data)
         tables = FileTables(name, path, digest, stored)
         if calibrations:
-            tables.vignetting, tables.tca = calibration_rows
+            tables.set_calibrations(calibration_rows)
         if cache is not None:
             cache.put(digest, "tables", stored)
             if calibrations:
@@ -200,10 +200,11 @@ def _made(
 
 def _parsed_values(data: bytes, calibrations: bool) -> tuple:
     """Parse one file's content: (its :attr:`FileTables.STORED` values, its
-    (vignetting, tca) rows or None), as plain data."""
+    calibrations (see :meth:`FileTables.calibrations`) or None), as plain data."""
     parsed, found = xml.parse(data, partial(FileReader, calibrations), READ)
     distortion, lens_of_row, omitted = found.distortion, found.lens_of_row, found.omitted
     vignetting, tca = found.vignetting, found.tca
+    lens_of_vignetting, lens_of_tca = found.lens_of_vignetting, found.lens_of_tca
     if parsed.status != STATUS_OK:
         status, line, error, message = (
             parsed.status,
@@ -218,9 +219,13 @@ def _parsed_values(data: bytes, calibrations: bool) -> tuple:
             vignetting = [SPECS[VIGNETTING].error_row(line, status, error),
                           *_marked(vignetting, status, message)]  # fmt: skip
             tca = [SPECS[TCA].error_row(line, status, error), *_marked(tca, status, message)]
+            lens_of_vignetting = [None, *lens_of_vignetting]  # type: ignore[misc]
+            lens_of_tca = [None, *lens_of_tca]  # type: ignore[misc]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
               found.lenses, distortion, lens_of_row, omitted)  # fmt: skip
-    return stored, (vignetting, tca) if calibrations else None
+    if not calibrations:
+        return stored, None
+    return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)
 
 
 def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
@@ -236,6 +241,12 @@ def unreadable(name: str, path: Path | None, message: str) -> FileTables:
     values = (STATUS_UNREADABLE, 0, 0, message, message, [],
               [error_row(0, STATUS_UNREADABLE, message)], [None], [()])  # fmt: skip
     tables = FileTables(name, path, b"", values)
-    tables.vignetting = [SPECS[VIGNETTING].error_row(0, STATUS_UNREADABLE, message)]
-    tables.tca = [SPECS[TCA].error_row(0, STATUS_UNREADABLE, message)]
+    tables.set_calibrations(
+        (
+            [SPECS[VIGNETTING].error_row(0, STATUS_UNREADABLE, message)],
+            [SPECS[TCA].error_row(0, STATUS_UNREADABLE, message)],
+            [None],
+            [None],
+        )
+    )
     return tables

@@ -145,7 +145,8 @@ class FileTables:
     index into ``lenses`` of each distortion row (None outside a lens);
     ``omitted`` the coefficient attributes each distortion row's element
     leaves out. ``vignetting`` and ``tca`` are their rows (see
-    :mod:`lensaudit.read.tables`), None until read.
+    :mod:`lensaudit.read.tables`), None until read; ``lens_of_vignetting`` and
+    ``lens_of_tca`` the lens index of each.
 
     ``name`` is how the file is shown, ``path`` where it is (None for a file
     read from git), ``digest`` the digest of its bytes (b"" if unreadable).
@@ -154,6 +155,7 @@ class FileTables:
     __slots__ = (
         "name", "path", "digest", "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "vignetting", "tca",
+        "lens_of_vignetting", "lens_of_tca",
     )  # fmt: skip
 
     #: The fields that the cache keeps, in order (all but name, path and digest).
@@ -173,6 +175,18 @@ class FileTables:
         self.lenses = [Lens(*lens) for lens in lenses]
         self.vignetting: list[tuple] | None = None
         self.tca: list[tuple] | None = None
+        self.lens_of_vignetting: list[int | None] | None = None
+        self.lens_of_tca: list[int | None] | None = None
+
+    def set_calibrations(self, values: tuple) -> None:
+        """Set the vignetting and TCA rows and the lens index of each, as
+        :meth:`calibrations` gives them."""
+        self.vignetting, self.tca, self.lens_of_vignetting, self.lens_of_tca = values
+
+    def calibrations(self) -> tuple:
+        """(vignetting rows, tca rows, lens index of each vignetting row, of each
+        tca row), as plain data: what the cache keeps."""
+        return self.vignetting, self.tca, self.lens_of_vignetting, self.lens_of_tca
 
     def stored(self) -> tuple:
         """The values the cache keeps (see :attr:`STORED`), as plain data."""

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from operator import itemgetter
-from typing import Any
 
 from .records import (
     DEFAULT_ASPECT_RATIO,
@@ -34,17 +33,20 @@ from .records import (
     quoted,
 )
 
-# typing only for type checkers
+# typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any
+
     from lxml import etree
+
+    #: The function that gives an element's line (see :func:`lensaudit.read.xml.parse`).
+    LineOf = Callable[[Any], int]
 
 VIGNETTING = "vignetting"
 TCA = "tca"
 KINDS = (VIGNETTING, TCA)
 
-#: The function that gives an element's line (see :func:`lensaudit.read.xml.parse`).
-LineOf = Callable[[Any], int]
 #: When an entry has several problems, its status names the most basic one.
 STATUS_PRIORITY = (STATUS_NO_LENS, STATUS_MISSING_ATTRIBUTE, STATUS_UNKNOWN_MODEL, STATUS_BAD_VALUE)
 
@@ -509,12 +511,15 @@ class FileReader:
         self.omitted: list[tuple[str, ...]] = []
         self.vignetting: list[tuple] | None = [] if calibrations else None
         self.tca: list[tuple] | None = [] if calibrations else None
+        self.lens_of_vignetting: list[int | None] | None = [] if calibrations else None
+        self.lens_of_tca: list[int | None] | None = [] if calibrations else None
 
     def add(self, piece: etree._Element, line_of: LineOf) -> None:
         """Read one piece of the document."""
         lenses, found = elements_in_context(piece, self.tags, len(self.lenses), line_of)
         self.lenses += lenses
         rows = {VIGNETTING: self.vignetting, TCA: self.tca}
+        lens_of = {VIGNETTING: self.lens_of_vignetting, TCA: self.lens_of_tca}
         for element, context in found:
             tag = element.tag
             if tag == _DISTORTION:
@@ -523,6 +528,7 @@ class FileReader:
                 self.omitted.append(omitted_coefficients(element))
             else:
                 rows[tag].append(SPECS[tag].row(element, context, line_of(element)))  # type: ignore[union-attr]
+                lens_of[tag].append(context.index)  # type: ignore[union-attr]
 
 
 #: The elements a :class:`FileReader` reads (what a root may be to be read whole).

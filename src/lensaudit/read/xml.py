@@ -15,17 +15,26 @@ from __future__ import annotations
 
 import re
 from collections import namedtuple
-from collections.abc import Callable
-from typing import Any, Protocol, TypeVar
 
 from .records import STATUS_NOT_DATABASE, STATUS_OK, STATUS_XML_ERROR
 
-# typing only for type checkers
+# typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Callable
+    from typing import Any, Protocol, TypeVar
+
     from lxml import etree
 
-V = TypeVar("V", bound="Visitor")
+    class Visitor(Protocol):
+        """What :func:`parse` hands a document to, piece by piece, in document
+        order: each child of the root element once it is complete (or the
+        root itself, where it is one of the elements read), with the
+        function that gives an element's line."""
+
+        def add(self, piece: etree._Element, line_of: Callable[[etree._Element], int]) -> None: ...
+
+    V = TypeVar("V", bound=Visitor)
 
 #: The root element of a Lensfun database file.
 DATABASE_ROOT = "lensdatabase"
@@ -78,15 +87,6 @@ class Parsed(
         return self.problem
 
 
-class Visitor(Protocol):
-    """What :func:`parse` hands a document to, piece by piece, in document order:
-    each child of the root element once it is complete (or the root itself,
-    where it is one of the elements read), with the function that gives an
-    element's line."""
-
-    def add(self, piece: etree._Element, line_of: Callable[[etree._Element], int]) -> None: ...
-
-
 def parser(recover: bool = False, **options: Any) -> etree.XMLParser:
     """An lxml parser that never touches the network, DTDs or entities."""
     from lxml import etree
@@ -103,7 +103,8 @@ _OPTIONS = dict(
     attribute_defaults=False,
     huge_tree=False,
     remove_pis=True,
-    collect_ids=False,  # no table of xml:id values: nothing looks them up
+    # collect_ids is left on: lxml opens the external DTD without it (a FIFO named
+    # as one would hang the run).
 )
 #: Bytes fed to the parser at a time: the tree read so far is cleared between feeds.
 _FEED = 1 << 20
@@ -131,9 +132,14 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
     lines = _Lines(data) if data.count(b"\n") >= _LIBXML2_LINES else None
     visiting = visitor()
     try:
-        if b"xmlns" in data or _root_name(data) in read:  # read as one tree
+        # Read as one tree: names in namespaces, a root that is an element read,
+        # and a document type, which is dropped before anything is read (libxml2
+        # would give an <!ATTLIST> default as the value of an attribute not written).
+        if b"xmlns" in data or b"<!DOCTYPE" in data or _root_name(data) in read:
             root = etree.fromstring(data, parser())
-            _use_local_names(root)
+            root.getroottree().docinfo.clear()
+            if b"xmlns" in data:
+                _use_local_names(root)
             _visit_tree(root, visiting, read, _line_getter(lines, root))
         else:
             root = _stream(data, visiting, lines)
@@ -218,6 +224,7 @@ def _recovered(
     except etree.XMLSyntaxError:
         root = None
     if root is not None:
+        root.getroottree().docinfo.clear()
         if b"xmlns" in data:
             _use_local_names(root)
         _visit_tree(root, visiting, read, _line_getter(None, root))

@@ -1,7 +1,9 @@
 """Reports of an audit: the paper's tables and figures, and a self-contained HTML page.
 
-:func:`write_report` writes a report directory; the stages it uses are
-importable on their own: :mod:`~lensaudit.report.tables` (Tables 1-2),
+:func:`audit` reads a database once and makes the audits a report shows
+(:class:`ReportAudits`); :func:`write_report` writes them as a report
+directory. The stages it uses are importable on their own:
+:mod:`~lensaudit.report.tables` (Tables 1-2),
 :mod:`~lensaudit.report.histogram` (Figure 5 data),
 :mod:`~lensaudit.report.figures` (matplotlib drawing),
 :mod:`~lensaudit.report.html` (the page), :mod:`~lensaudit.report.paper`
@@ -12,6 +14,14 @@ importable on their own: :mod:`~lensaudit.report.tables` (Tables 1-2),
 
 from __future__ import annotations
 
+from .audits import ReportAudits, audit
 from .writer import REPORT_FILES, ReportExistsError, planned_files, write_report
 
-__all__ = ["REPORT_FILES", "ReportExistsError", "planned_files", "write_report"]
+__all__ = [
+    "REPORT_FILES",
+    "ReportAudits",
+    "ReportExistsError",
+    "audit",
+    "planned_files",
+    "write_report",
+]

@@ -1,19 +1,16 @@
 """The report's vignetting and TCA section, and the vignetting.csv and tca.csv files.
 
-The same files the distortion audit read are read again for their
-``<vignetting>`` and ``<tca>`` elements (see :mod:`lensaudit.calibrations`);
+The audits (see :mod:`lensaudit.calibrations`) are made from the same read
+of the database as the distortion audit (:mod:`lensaudit.report.audits`);
 the section gives the counts by severity and the worst entries.
 """
 
 from __future__ import annotations
 
-import io
-from collections.abc import Callable
 from html import escape
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..pipeline import Audit
     from ..tca import TCAAudit
     from ..vignetting import VignettingAudit
 
@@ -21,23 +18,11 @@ if TYPE_CHECKING:
 WORST_SHOWN = 40
 
 
-def audits(
-    audit: Audit, meanwhile: Callable[[], object] | None = None
-) -> tuple[VignettingAudit, TCAAudit]:
-    """The vignetting and TCA audits of the files ``audit`` read, parsed (in
-    workers where that pays) while this process runs ``meanwhile()``."""
-    from .. import tca, vignetting
-    from ..calibrations import load_files
-
-    loaded = load_files([(file.path, file.name) for file in audit.files], meanwhile)
-    return vignetting.from_load(loaded, audit.source), tca.from_load(loaded, audit.source)
-
-
 def csv_text(calibration_audit: Any) -> str:
     """Every entry of one kind as CSV, the columns of ``scan --kind``."""
-    buffer = io.StringIO()
-    calibration_audit.write_csv(buffer)
-    return buffer.getvalue()
+    from .tables import csv_text
+
+    return csv_text(calibration_audit.COLUMNS, calibration_audit.columns().values())
 
 
 def _rows_table(table_id: str, caption: str, header: list[str], rows: list[list[str]]) -> str:

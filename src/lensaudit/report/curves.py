@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import normalizer
-from ..loader import DistortionEntry
+from ..read.records import DistortionEntry
 
 FloatArray = NDArray[np.float64]
 

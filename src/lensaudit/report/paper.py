@@ -27,13 +27,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import normalizer
-from ..loader import MODEL_COEFFICIENTS, make_parser
+from ..read.records import MODEL_COEFFICIENTS
 from ..summary import MODELS, TOTAL
 from . import select
 from .tables import percent
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from ..pipeline import Audit
+    from ..read import FileTables
 
 #: How many entries a difference line names before it says "and N more".
 NAMED = 6
@@ -100,28 +103,15 @@ def algorithm1(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> NDArray[np.float64]:
     return result
 
 
-def omitted_coefficients(audit: Audit) -> dict[int, tuple[str, ...]]:
-    """Audited entries whose ``<distortion>`` leaves out coefficients: index -> names."""
-    from lxml import etree
+def omitted_coefficients(audit: Audit, files: Sequence[FileTables]) -> dict[int, tuple[str, ...]]:
+    """Audited entries whose ``<distortion>`` leaves out coefficients: index -> names.
 
-    present: dict[tuple[str, int], set[str]] = {}
-    for source in audit.files:
-        try:
-            root = etree.fromstring(source.path.read_bytes(), make_parser())
-        except (OSError, etree.XMLSyntaxError):
-            continue
-        for element in root.iter("distortion"):
-            present[(source.name, element.sourceline or 0)] = set(element.attrib)
-    omitted = {}
-    for index, entry in enumerate(audit.entries):
-        names = MODEL_COEFFICIENTS.get(entry.model)
-        attributes = present.get((entry.file, entry.line))
-        if not audit.audited[index] or names is None or attributes is None:
-            continue
-        missing = tuple(n for n in names if n not in attributes)
-        if missing:
-            omitted[index] = missing
-    return omitted
+    ``files`` are the reader's tables the audit was made from, in its order
+    (see :class:`lensaudit.report.audits.ReportAudits`).
+    """
+    omitted = (names for tables in files for names in tables.omitted)
+    found = enumerate(zip(omitted, audit.audited.tolist(), strict=True))
+    return {index: names for index, (names, audited) in found if names and audited}
 
 
 def paper_r_max(audit: Audit, omitted: dict[int, tuple[str, ...]]) -> NDArray[np.float64]:
@@ -190,8 +180,11 @@ def _tables(
     return counts
 
 
-def compare(audit: Audit, values: dict[str, Any]) -> Comparison:
-    """Compare an audit with the paper's printed values, explaining each difference."""
+def compare(
+    audit: Audit, values: dict[str, Any], omitted: dict[int, tuple[str, ...]]
+) -> Comparison:
+    """Compare an audit with the paper's printed values, explaining each difference;
+    ``omitted`` are the coefficients its entries leave out (:func:`omitted_coefficients`)."""
     summary = audit.summary
     m = audit.metrics
     audited = audit.audited
@@ -202,7 +195,6 @@ def compare(audit: Audit, values: dict[str, Any]) -> Comparison:
     paper1 = {row["model"]: row for row in values["table1"]}
     paper2 = {row["model"]: row for row in values["table2"]}
 
-    omitted = omitted_coefficients(audit)
     omitted_mask = np.zeros(len(audit.entries), dtype=bool)
     omitted_mask[list(omitted)] = True
     emulated = paper_r_max(audit, omitted)
@@ -369,7 +361,7 @@ def compare(audit: Audit, values: dict[str, Any]) -> Comparison:
 def database_name(audit: Audit) -> str:
     """How the compared database is named: its label, without local paths for the bundled one."""
     if audit.source.bundled:
-        from ..database import lensfunpy_version
+        from ..read.paths import lensfunpy_version
 
         return f"the Lensfun database bundled with lensfunpy {lensfunpy_version()}"
     return audit.source.label

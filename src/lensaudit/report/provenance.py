@@ -12,7 +12,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import __version__, database
+from .. import __version__
+from ..read.paths import lensfunpy_version, timestamp
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -24,7 +25,7 @@ class Provenance:
 
     ``timestamp`` is Lensfun's ``timestamp.txt`` (seconds since 1970) of each
     database directory that has one, ``content_hash`` the SHA-256 over the
-    names and bytes of the files read (:func:`lensaudit.database.content_hash`).
+    names and bytes of the files read (:func:`content_hash`).
     """
 
     database: str
@@ -68,7 +69,7 @@ def _timestamps(paths: tuple[Path, ...]) -> str:
     stamps = []
     for path in paths:
         directory = path if path.is_dir() else path.parent
-        stamp = database.timestamp(directory)
+        stamp = timestamp(directory)
         if stamp:
             readable = stamp
             if stamp.isdigit():
@@ -77,11 +78,22 @@ def _timestamps(paths: tuple[Path, ...]) -> str:
     return "; ".join(dict.fromkeys(stamps))
 
 
+def content_hash(files: list[Path]) -> str:
+    """SHA-256 over the names and bytes of the files, in the order given."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for file in files:
+        digest.update(os.fsencode(file.name) + b"\0")
+        digest.update(file.read_bytes())
+    return digest.hexdigest()
+
+
 def collect(audit: Audit) -> Provenance:
     """Provenance of an audit (reads the files again to hash them)."""
     source = audit.source
     if source.bundled:
-        name = f"Lensfun database bundled with lensfunpy {database.lensfunpy_version()}"
+        name = f"Lensfun database bundled with lensfunpy {lensfunpy_version()}"
         location = "lensfunpy/db_files (installed with the lensfunpy package)"
     else:
         name = "Lensfun database"
@@ -95,8 +107,8 @@ def collect(audit: Audit) -> Provenance:
         entries=summary.entries,
         audited=summary.audited,
         timestamp=_timestamps(source.paths),
-        content_hash=database.content_hash(readable) if readable else "",
+        content_hash=content_hash(readable) if readable else "",
         lensaudit_version=__version__,
-        lensfunpy_version=database.lensfunpy_version(),
+        lensfunpy_version=lensfunpy_version(),
         generated=generated_at(),
     )

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import PurePath
 from typing import TYPE_CHECKING
 
-from ..loader import STATUS_OK, DistortionEntry
+from ..read.records import STATUS_OK, DistortionEntry
 
 if TYPE_CHECKING:
     from ..pipeline import Audit

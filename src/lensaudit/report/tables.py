@@ -2,7 +2,9 @@
 
 Table 1 counts audited entries per model by finite or infinite r_max;
 Table 2 splits the finite ones by where D(r) goes beyond r_max. The rows come
-from :mod:`lensaudit.summary`; this module only lays them out.
+from :mod:`lensaudit.summary`; this module only lays them out. Its
+:func:`csv_text` makes the text of every CSV file of the report but
+``entries.csv`` (``scan``'s CSV).
 """
 
 from __future__ import annotations
@@ -10,8 +12,8 @@ from __future__ import annotations
 import csv
 import io
 import re
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..summary import Summary
@@ -48,13 +50,19 @@ def table2_rows(summary: Summary) -> list[Row]:
     ]
 
 
-def to_csv(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """CSV text with a header line; percentages without the % sign."""
+def csv_text(header: Sequence[str], columns: Iterable[Iterable[Any]]) -> str:
+    """CSV text of a header line and columns of values, written by
+    :func:`lensaudit.formats.csv_format.write_rows`."""
+    from ..formats.csv_format import write_rows
+
     out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(header)
-    writer.writerows(rows)
+    write_rows(out, header, columns)
     return out.getvalue()
+
+
+def to_csv(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """CSV text of a table with a header line; percentages without the % sign."""
+    return csv_text(header, zip(*rows, strict=True))
 
 
 def to_markdown(header: Sequence[str], rows: Sequence[Sequence[object]], caption: str = "") -> str:

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:
-    from ..loader import DistortionEntry
+    from ..read.records import DistortionEntry
 
 #: Squares along the short side of the input image.
 SQUARES = 12

@@ -2,12 +2,13 @@
 
 Existing files are replaced only when asked (``force``); every file is
 written to a temporary name first and renamed, so that an interrupted run
-never leaves a half-written file under a report name.
+never leaves a half-written file under a report name. ``entries.csv`` is
+``scan``'s CSV; every other CSV file is written by
+:func:`lensaudit.formats.csv_format.write_rows`.
 """
 
 from __future__ import annotations
 
-import csv
 import io
 import json
 import math
@@ -20,6 +21,7 @@ from .. import __version__
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
+    from .audits import ReportAudits
 
 #: Files of every report, in the order they are written.
 REPORT_FILES = (
@@ -85,29 +87,10 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-def folding_rows(audit: Audit) -> list[list[str]]:
-    """``folding.csv`` rows: the entries that fold inside their image, by r_normalized."""
-    from ..pipeline import format_float
-
-    records = audit.records()
-    rows = []
-    for index in audit.summary.folding:
-        record = records[index]
-        rows.append(
-            [
-                format_float(v) if isinstance(v, float) else str(v)
-                for v in (record[c] for c in FOLDING_COLUMNS)
-            ]
-        )
-    return rows
-
-
-def _csv_text(header: tuple[str, ...] | list[str], rows: list[Any]) -> str:
-    out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(header)
-    writer.writerows(rows)
-    return out.getvalue()
+def folding_columns(audit: Audit) -> list[list[Any]]:
+    """``folding.csv``'s columns: the entries that fold inside their image, by r_normalized."""
+    folding = audit.summary.folding
+    return [[column[i] for i in folding] for column in map(audit.column, FOLDING_COLUMNS)]
 
 
 def _atomic(path: Path, write: Callable[[Path], None]) -> None:
@@ -124,17 +107,14 @@ def _write_text(path: Path, text: str) -> None:
     _atomic(path, lambda p: p.write_text(text, encoding="utf-8", newline=""))
 
 
-def _import_figures() -> None:
-    from . import figures  # noqa: F401  (the import is the point)
-
-
 def write_report(
-    audit: Audit,
+    audits: ReportAudits,
     directory: str | os.PathLike[str],
     force: bool = False,
     paper_values: dict[str, Any] | None = None,
 ) -> list[Path]:
-    """Write the report of ``audit`` into ``directory`` (created if needed).
+    """Write the report of a database's ``audits`` (see
+    :func:`lensaudit.report.audit`) into ``directory`` (created if needed).
 
     Raises :class:`ReportExistsError` when a report file is already there and
     ``force`` is false; ``OSError`` when the directory cannot be written.
@@ -142,8 +122,9 @@ def write_report(
     the paper comparison is added. Returns the paths written.
     """
     from ..formats import writer
-    from . import calibrations, histogram, html, provenance, tables
+    from . import calibrations, figures, histogram, html, provenance, tables
 
+    audit, vignetting_audit, tca_audit = audits.distortion, audits.vignetting, audits.tca
     directory = Path(directory)
     names = planned_files(paper_values is not None)
     if directory.exists() and not directory.is_dir():
@@ -162,12 +143,9 @@ def write_report(
     if paper_values is not None:
         from . import paper
 
-        comparison = paper.compare(audit, paper_values)
-
-    # The files are parsed again for their vignetting and TCA while matplotlib,
-    # the longest import of all, is imported for the figure.
-    vignetting_audit, tca_audit = calibrations.audits(audit, _import_figures)
-    from . import figures
+        comparison = paper.compare(
+            audit, paper_values, paper.omitted_coefficients(audit, audits.files)
+        )
 
     buffer = io.StringIO()
     writer("csv")(audit, buffer)
@@ -200,11 +178,11 @@ def write_report(
         "table1.csv": tables.to_csv(tables.TABLE1_HEADER, table1),
         "table2.md": tables.to_markdown(tables.TABLE2_HEADER, table2, tables.TABLE2_CAPTION),
         "table2.csv": tables.to_csv(tables.TABLE2_HEADER, table2),
-        "folding.csv": _csv_text(FOLDING_COLUMNS, folding_rows(audit)),
+        "folding.csv": tables.csv_text(FOLDING_COLUMNS, folding_columns(audit)),
         "vignetting.csv": calibrations.csv_text(vignetting_audit),
         "tca.csv": calibrations.csv_text(tca_audit),
-        "fig5_r_normalized.csv": _csv_text(
-            ("bin_low", "bin_high", "count", "count_paper_units"), fig5.rows()
+        "fig5_r_normalized.csv": tables.csv_text(
+            ("bin_low", "bin_high", "count", "count_paper_units"), zip(*fig5.rows(), strict=True)
         ),
     }
     written = []
