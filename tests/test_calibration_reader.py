@@ -21,7 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lensaudit import calibrations
-from lensaudit.database import bundled_database_path
+from lensaudit.read import read_bytes
+from lensaudit.read.paths import bundled_database_path
 from test_fuzz_mutations import _start_tag_end_line
 
 #: Per kind: model -> coefficient attributes and their defaults; the attributes
@@ -76,10 +77,22 @@ class Node:
     attributes: dict[str, str]
     line: int
     children: list[Node] = field(default_factory=list)
-    text: list[str] = field(default_factory=list)  # all text inside, descendants' too
+    #: The pieces of its own text: markup inside it (a child, a comment, a
+    #: processing instruction, a CDATA section) ends one piece.
+    pieces: list[str] = field(default_factory=list)
+    open: bool = False  # whether text now continues the last piece
+
+    def add_text(self, text: str) -> None:
+        if self.open:
+            self.pieces[-1] += text
+        else:
+            self.pieces.append(text)
+            self.open = True
 
     def content(self) -> str:
-        return "".join(self.text).strip()
+        """The text as liblensfun takes it (GMarkup hands each piece over on its
+        own, and the last that is not blank stays): stripped."""
+        return next((p.strip() for p in reversed(self.pieces) if p.strip()), "")
 
 
 def start_tag_end_lines(data: bytes, starts: list[int]) -> list[int]:
@@ -98,20 +111,28 @@ def parse(data: bytes) -> Node:
     top = Node("", {}, 0)
     stack, nodes, starts = [top], [], []
 
+    def markup(*_: object) -> None:
+        stack[-1].open = False
+
     def begin(tag: str, attributes: dict[str, str]) -> None:
+        markup()
         node = Node(tag, attributes, 0)
         stack[-1].children.append(node)
         stack.append(node)
         nodes.append(node)
         starts.append(parser.CurrentByteIndex)
 
-    def characters(text: str) -> None:
-        for node in stack[1:]:
-            node.text.append(text)
+    def end(tag: str) -> None:
+        stack.pop()
+        markup()
 
     parser.StartElementHandler = begin
-    parser.EndElementHandler = lambda tag: stack.pop()
-    parser.CharacterDataHandler = characters
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = lambda text: stack[-1].add_text(text)
+    parser.CommentHandler = markup
+    parser.ProcessingInstructionHandler = markup
+    parser.StartCdataSectionHandler = markup
+    parser.EndCdataSectionHandler = markup
     parser.Parse(data, True)
     for node, line in zip(nodes, start_tag_end_lines(data, starts), strict=True):
         node.line = line
@@ -203,8 +224,18 @@ def as_read(record: object, kind: str) -> tuple:
     return (*head, *values, *(getattr(record, name) for name in FIELDS[kind]))
 
 
+def read_records(data: bytes, name: str = "x.xml"):
+    """The vignetting and TCA records of one file's content, and its error."""
+    tables = read_bytes(data, name, calibrations=True)
+    return (
+        calibrations.CalibrationRecords.of_file("vignetting", name, tables.vignetting),
+        calibrations.CalibrationRecords.of_file("tca", name, tables.tca),
+        tables.error,
+    )
+
+
 def assert_reads_as_the_reference(data: bytes) -> None:
-    vignetting, tca, error = calibrations.read_bytes(data, "x.xml")
+    vignetting, tca, error = read_records(data)
     assert error == ""
     expected = reference(data)
     for kind, records in (("vignetting", vignetting), ("tca", tca)):
@@ -293,6 +324,25 @@ def test_the_independent_reader_counts_lines_as_libxml2_does():
     assert [r[0] for r in reference(data)["vignetting"]] == [5]  # where the start tag ends
 
 
+@pytest.mark.parametrize(
+    "lens_text",
+    [
+        "<type>rectilinear<!---->fisheye</type>",
+        "<cropfactor>1.5<!-- was 2 -->2</cropfactor>",
+        "<cropfactor>2<!---->  </cropfactor>",
+        "<aspect-ratio>4:3<!---->x</aspect-ratio>",
+    ],
+)
+def test_lens_text_split_by_a_comment_reads_as_the_independent_reader_reads_it(lens_text):
+    data = (
+        f"<lensdatabase><lens><maker>M</maker><model>L</model>{lens_text}\n"
+        '<calibration><tca model="linear" focal="10" kr="1" kb="1"/>'
+        '<vignetting model="pa" focal="10" aperture="4" distance="10"/>'
+        "</calibration></lens></lensdatabase>"
+    ).encode()
+    assert_reads_as_the_reference(data)
+
+
 def test_an_element_outside_a_lens_is_no_lens_in_both_readers():
     data = b'<lensdatabase><tca model="linear" focal="10" kr="1" kb="1"/></lensdatabase>'
     assert [r[4] for r in reference(data)["tca"]] == ["no_lens"]
@@ -301,7 +351,7 @@ def test_an_element_outside_a_lens_is_no_lens_in_both_readers():
 
 def test_a_record_is_made_only_when_it_is_asked_for():
     made = []
-    records = calibrations.read_bytes(
+    records = read_records(
         (bundled_database_path() / "compact-sony.xml").read_bytes(), "compact-sony.xml"
     )[1]
     entry = records._entry
@@ -312,8 +362,8 @@ def test_a_record_is_made_only_when_it_is_asked_for():
 
 
 def test_records_from_entry_objects_are_those_entries(bundled_db):
-    _, loaded = calibrations.load(bundled_db / "compact-sony.xml")
-    entries = list(loaded.tca)
+    database = calibrations.load(bundled_db / "compact-sony.xml")
+    entries = list(calibrations.CalibrationRecords("tca", *database.rows("tca")))
     again = calibrations.CalibrationRecords.of_entries("tca", entries)
     assert list(map(repr, again)) == list(map(repr, entries))
     assert again.column("file") == [e.file for e in entries]

@@ -3,10 +3,12 @@ and modules that depend on each other one way only."""
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
 import sys
+from collections.abc import Collection, Iterator
 from pathlib import Path
 
 import pytest
@@ -112,15 +114,17 @@ def test_report_help_imports_no_heavy_module(cache_dir):
     assert imported_by(["report", "--help"], cache_dir) == set()
 
 
-def test_the_cache_does_not_import_the_pipeline():
-    found = imported_modules("import lensaudit.cache")
-    assert "lensaudit.cache" in found and "lensaudit.pipeline" not in found
+def test_the_reader_and_its_cache_import_neither_the_pipeline_nor_a_heavy_module():
+    # lxml is imported when a file is parsed, not before: a warm scan never needs it.
+    found = imported_modules("import lensaudit.read, lensaudit.read.cache")
+    assert "lensaudit.read.cache" in found
+    assert not found & {"lensaudit.pipeline", *HEAVY}
 
 
 def test_the_summary_does_not_import_the_pipeline_or_numpy():
     found = imported_modules("import lensaudit.summary")
     assert "lensaudit.summary" in found
-    assert not found & {"lensaudit.pipeline", "lensaudit.cache", "numpy"}
+    assert not found & {"lensaudit.pipeline", *HEAVY}
 
 
 def test_the_output_formats_do_not_import_the_pipeline():
@@ -140,3 +144,175 @@ def test_a_plain_scan_from_the_console_never_imports_click(cache_dir):
     found = imported_by(["scan", "-f", "csv", "-o", os.devnull], cache_dir, ("click", *HEAVY))
     assert "lxml" in found  # it did scan
     assert "click" not in found
+
+
+# -- the import graph of the source ---------------------------------------------------
+
+SOURCE = Path(__file__).resolve().parents[1] / "src"
+
+
+def source_modules(root: Path = SOURCE) -> dict[str, tuple[Path, bool]]:
+    """Every module of the package in ``root`` (lensaudit's source): name -> (file,
+    whether it is a package)."""
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root).with_suffix("").parts)
+        package = parts[-1] == "__init__"
+        found[".".join(parts[:-1] if package else parts)] = (path, package)
+    return found
+
+
+def _when(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> str:
+    """When an import runs: "type checking" (under ``if TYPE_CHECKING:``, never),
+    "call" (inside a function) or "import" (when the module is imported)."""
+    when = "import"
+    parent = parents.get(node)
+    while parent is not None:
+        if isinstance(parent, ast.If) and "TYPE_CHECKING" in ast.unparse(parent.test):
+            return "type checking"
+        if isinstance(parent, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            when = "call"
+        parent = parents.get(parent)
+    return when
+
+
+def imports(path: Path) -> Iterator[tuple[ast.Import | ast.ImportFrom, str]]:
+    """Every import statement of a file, wherever it is, and when it runs."""
+    tree = ast.parse(path.read_bytes(), str(path))
+    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node, _when(node, parents)
+
+
+def imported_module(node: ast.Import | ast.ImportFrom, module: str, package: bool) -> str:
+    """The module a ``from`` statement of ``module`` imports from, relative
+    ones resolved."""
+    if not node.level:
+        return node.module or ""
+    base = module.split(".") if package else module.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join([*base, node.module] if node.module else base)
+
+
+def modules_named(node: ast.Import | ast.ImportFrom, module: str, package: bool) -> list[str]:
+    """The modules an import statement names: those of ``import``, or the one
+    ``from`` names."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    return [imported_module(node, module, package)]
+
+
+def imported_names(
+    node: ast.Import | ast.ImportFrom, module: str, package: bool, modules: Collection[str]
+) -> list[str]:
+    """The ``modules`` an import statement of ``module`` imports: ``from P import
+    x`` imports the submodule P.x where there is one, and P for any other name."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names if alias.name in modules]
+    source = imported_module(node, module, package)
+    found = {f"{source}.{alias.name}" for alias in node.names} & set(modules)
+    if len(found) < len(node.names) and source in modules:
+        found.add(source)
+    return sorted(found)
+
+
+def import_graph(root: Path = SOURCE) -> dict[str, dict[str, list[str]]]:
+    """module -> module of the same source it imports -> where (file:line, when it runs)."""
+    modules = source_modules(root)
+    graph: dict[str, dict[str, list[str]]] = {name: {} for name in modules}
+    for name, (path, package) in modules.items():
+        for node, when in imports(path):
+            for target in imported_names(node, name, package, modules):
+                if target != name:
+                    where = f"{path.relative_to(root.parent)}:{node.lineno} ({when})"
+                    graph[name].setdefault(target, []).append(where)
+    return graph
+
+
+def cycles(graph: dict[str, dict[str, list[str]]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for target in sorted(graph[module]):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            component = []
+            while not component or component[-1] != module:
+                component.append(stack.pop())
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return found
+
+
+def test_the_import_graph_sees_relative_function_level_and_submodule_imports(tmp_path):
+    package = tmp_path / "src" / "pkg"
+    (package / "sub").mkdir(parents=True)
+    files = {
+        "__init__.py": "def late():\n    from .sub import deep\n",
+        "top.py": "import pkg.sub\nfrom . import other, VALUE\n",
+        "other.py": "TYPE_CHECKING = False\nif TYPE_CHECKING:\n    from .top import x\n",
+        "sub/__init__.py": "from .. import top\n",
+        "sub/deep.py": "from ..other import y\n",
+    }
+    for name, text in files.items():
+        (package / name).write_text(text)
+    graph = import_graph(tmp_path / "src")
+    assert {name: sorted(targets) for name, targets in graph.items()} == {
+        "pkg": ["pkg.sub.deep"],
+        "pkg.top": ["pkg", "pkg.other", "pkg.sub"],
+        "pkg.other": ["pkg.top"],
+        "pkg.sub": ["pkg.top"],
+        "pkg.sub.deep": ["pkg.other"],
+    }
+    assert graph["pkg"]["pkg.sub.deep"] == ["src/pkg/__init__.py:2 (call)"]
+    assert graph["pkg.other"]["pkg.top"] == ["src/pkg/other.py:3 (type checking)"]
+    assert cycles(graph) == [["pkg", "pkg.other", "pkg.sub", "pkg.sub.deep", "pkg.top"]]
+    assert cycles({"a": {"b": []}, "b": {}, "c": {"a": []}}) == []
+
+
+def test_no_import_cycle_among_lensaudit_modules_counting_function_level_imports():
+    """Every import counts, wherever it is: at the top, in a function (it runs
+    when called), under ``if TYPE_CHECKING:`` (for type checkers); ``from P
+    import x`` imports the submodule P.x where there is one."""
+    graph = import_graph()
+    found = cycles(graph)
+    explained = [
+        f"{source} -> {target}: {', '.join(where)}"
+        for component in found
+        for source in component
+        for target, where in sorted(graph[source].items())
+        if target in component
+    ]
+    assert found == [], "import cycles:\n" + "\n".join(explained)
+
+
+def test_nothing_but_the_reader_imports_lxml():
+    reader = SOURCE / "lensaudit" / "read"
+    found = []
+    for name, (path, package) in source_modules().items():
+        for node, when in imports(path):
+            named = modules_named(node, name, package)
+            lxml = any(n == "lxml" or n.startswith("lxml.") for n in named)
+            if lxml and reader not in path.parents:
+                found.append(f"{path.relative_to(SOURCE.parent)}:{node.lineno} ({when})")
+    assert found == [], "lxml imported outside lensaudit.read:\n" + "\n".join(found)
+    # The check can see an import of lxml: the reader's.
+    assert any(
+        modules_named(node, "lensaudit.read.xml", False) == ["lxml"]
+        for node, _ in imports(reader / "xml.py")
+    )

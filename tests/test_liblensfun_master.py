@@ -25,13 +25,9 @@ def liblensfun():
 @pytest.fixture(scope="module")
 def bundled_files() -> list[Path]:
     """The XML files of lensfunpy's bundled database."""
-    try:
-        from lensaudit.database import bundled_database_path
-    except ImportError:  # lensaudit being reworked: lensfunpy's own directory
-        lensfunpy = pytest.importorskip("lensfunpy")
-        directory = Path(lensfunpy.__file__).parent / "db_files"
-    else:
-        directory = bundled_database_path()
+    from lensaudit.read.paths import bundled_database_path
+
+    directory = bundled_database_path()
     files = sorted(directory.glob("*.xml"))
     assert files, f"no database files in {directory}"
     return files

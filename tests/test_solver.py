@@ -10,8 +10,10 @@ import mpmath
 import numpy as np
 import pytest
 
+import lensaudit.solver
 from exact import reference
 from lensaudit.solver import (
+    arrays,
     min_positive_root,
     min_positive_root_paper,
     min_positive_root_paper_vectorized,
@@ -234,3 +236,22 @@ def test_the_papers_algorithm_can_return_a_negative_radius():
     # single-real-root branch returns it unchecked; there is no fold at all.
     assert min_positive_root_paper(1.0, 1.0, 1.0) == pytest.approx(-1.0)
     assert min_positive_root(1.0, 1.0, 1.0) == math.inf
+
+
+def test_the_package_gives_the_array_codes_functions():
+    for name in lensaudit.solver.__all__:
+        assert getattr(lensaudit.solver, name) is getattr(arrays, name)
+    assert lensaudit.solver.min_positive_root is min_positive_root
+
+
+def test_importing_the_solver_package_or_its_kernel_does_not_import_numpy():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import lensaudit.solver, lensaudit.solver.kernel\n"
+        "print('numpy' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"

@@ -18,9 +18,9 @@ from hypothesis import strategies as st
 
 from exact import exceeds_max_float, odd_root_bracket
 from lensaudit import normalizer
-from lensaudit.database import bundled_database_path
-from lensaudit.loader import load
-from lensaudit.solver import PATHS, min_positive_root, min_positive_root_paths
+from lensaudit.read import read
+from lensaudit.read.paths import bundled_database_path
+from lensaudit.solver.arrays import PATHS, min_positive_root, min_positive_root_paths
 
 TOLERANCE = Fraction(1, 10**12)
 SMALLEST_NORMAL = Fraction(2) ** -1022
@@ -202,7 +202,7 @@ def test_array_and_scalar_calls_agree(cubics):
 
 
 def test_lensfun_database_cubics_never_need_exact_arithmetic():
-    entries = [e for e in load(bundled_database_path()).entries if e.status == "ok"]
+    entries = [e for e in read(bundled_database_path()).entries() if e.status == "ok"]
     cubics = [
         normalizer.ptlens(
             *(np.array([getattr(e, n) for e in entries if e.model == "ptlens"]) for n in "abc")

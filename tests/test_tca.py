@@ -77,15 +77,19 @@ def test_every_tca_element_of_the_bundled_database_is_one_record(bundled_db):
     for path in sorted(bundled_db.glob("*.xml")):
         root = etree.parse(str(path)).getroot()
         expected += [(path.name, element.sourceline) for element in root.iter("tca")]
-    _, loaded = calibrations.load(bundled_db)
-    assert [(e.file, e.line) for e in loaded.tca] == expected
+    records = tca_records(calibrations.load(bundled_db))
+    assert [(e.file, e.line) for e in records] == expected
     assert len(expected) > 3000
-    assert {e.status for e in loaded.tca} == {"ok"}
+    assert {e.status for e in records} == {"ok"}
+
+
+def tca_records(database) -> calibrations.CalibrationRecords:
+    """The <tca> records of a database read with its calibrations."""
+    return calibrations.CalibrationRecords("tca", *database.rows("tca"))
 
 
 def load_one(write_xml, element: str, **lens):
-    _, loaded = calibrations.load(write_xml(lens_xml(element, **lens)))
-    (entry,) = loaded.tca
+    (entry,) = tca_records(calibrations.load(write_xml(lens_xml(element, **lens))))
     return entry
 
 

@@ -26,7 +26,8 @@ from lxml import etree
 
 from conftest import lens_xml
 from lensaudit import calibrations, vignetting
-from lensaudit.loader import LoadError
+from lensaudit.read import LoadError, read_bytes
+from lensaudit.read.paths import bundled_database_path
 
 W = sympy.Symbol("w")
 
@@ -139,18 +140,21 @@ def vignetting_lines(database: Path) -> list[tuple[str, int]]:
     return found
 
 
+def records_of(database, kind: str = "vignetting") -> calibrations.CalibrationRecords:
+    """The records of one kind of a database read with its calibrations."""
+    return calibrations.CalibrationRecords(kind, *database.rows(kind))
+
+
 def test_every_vignetting_element_of_the_bundled_database_is_one_record(bundled_db):
-    _, loaded = calibrations.load(bundled_db)
-    records = [(e.file, e.line) for e in loaded.vignetting]
-    assert records == vignetting_lines(bundled_db)
+    records = records_of(calibrations.load(bundled_db))
+    assert [(e.file, e.line) for e in records] == vignetting_lines(bundled_db)
     assert len(records) > 20000
-    assert {e.status for e in loaded.vignetting} == {"ok"}
+    assert set(records.column("status")) == {"ok"}
 
 
 def load_one(write_xml, *elements: str, **lens) -> list:
     path = write_xml(lens_xml(*elements, **lens))
-    _, loaded = calibrations.load(path)
-    return loaded.vignetting
+    return list(records_of(calibrations.load(path)))
 
 
 def test_a_record_carries_the_lens_and_the_calibration_overrides(write_xml):
@@ -215,7 +219,7 @@ def test_an_element_outside_a_lens_is_no_lens(write_xml):
         '<lensdatabase><calibration><vignetting model="pa" focal="10" aperture="4" '
         'distance="10" k1="-0.3"/></calibration></lensdatabase>'
     )
-    (entry,) = calibrations.load(path)[1].vignetting
+    (entry,) = records_of(calibrations.load(path))
     assert (entry.status, entry.line) == ("no_lens", 1)
 
 
@@ -223,12 +227,13 @@ def test_a_broken_file_is_one_error_record_then_what_recovery_reads(write_xml):
     text = lens_xml(
         '<vignetting model="pa" focal="10" aperture="4" distance="10" k1="-0.3"/>'
     ).replace("</lensdatabase>", "")
-    _, loaded = calibrations.load(write_xml(text))
-    head, salvaged = loaded.vignetting
+    database = calibrations.load(write_xml(text))
+    head, salvaged = records_of(database)
     assert head.status == salvaged.status == "xml_error"
     assert "not well-formed" in head.message and head.line > 0
     assert salvaged.k1 == -0.3 and "recovery" in salvaged.message
-    assert loaded.tca[0].status == "xml_error"  # the TCA audit accounts for the file too
+    # The TCA audit accounts for the file too.
+    assert records_of(database, "tca")[0].status == "xml_error"
 
 
 def test_a_file_that_is_not_a_database_is_one_record_then_its_elements(write_xml):
@@ -236,15 +241,15 @@ def test_a_file_that_is_not_a_database_is_one_record_then_its_elements(write_xml
         '<notlensfun><lens><calibration><vignetting model="pa" focal="10" aperture="4" '
         'distance="10"/></calibration></lens></notlensfun>'
     )
-    statuses = [e.status for e in calibrations.load(path)[1].vignetting]
+    statuses = [e.status for e in records_of(calibrations.load(path))]
     assert statuses == ["not_database", "not_database"]
 
 
 def test_a_file_that_cannot_be_read_is_one_unreadable_record(write_xml, tmp_path):
     good = write_xml(lens_xml())
     os.mkfifo(good.parent / "fifo.xml")
-    _, loaded = calibrations.load(good.parent)
-    assert [(e.file, e.status) for e in loaded.vignetting] == [("fifo.xml", "unreadable")]
+    records = records_of(calibrations.load(good.parent))
+    assert [(e.file, e.status) for e in records] == [("fifo.xml", "unreadable")]
 
 
 def test_a_path_that_does_not_exist_raises_load_error(tmp_path):
@@ -494,8 +499,7 @@ def test_findings_leave_whole_file_problems_to_the_distortion_check(write_xml):
 
 @pytest.fixture
 def report_dir(write_xml, tmp_path):
-    from lensaudit.pipeline import run
-    from lensaudit.report import write_report
+    from lensaudit.report import audit, write_report
 
     database = write_xml(
         lens_xml(
@@ -507,7 +511,7 @@ def report_dir(write_xml, tmp_path):
         )
     ).parent
     out = tmp_path / "report"
-    write_report(run(database), out)
+    write_report(audit(database), out)
     return database, out
 
 
@@ -555,11 +559,17 @@ def test_the_short_path_gives_the_record_the_full_examination_gives(model, attri
         element.set("model", model)
     for key, value in attributes.items():
         element.set(key, value)
-    spec = calibrations.SPECS["vignetting"]
-    context = calibrations.loader.lens_context(None)
-    context.problem = ""  # a lens without problems
-    fast = calibrations._row(spec, element, calibrations._lens_of(context), context)
-    full = calibrations._checked_row(spec, element, context)
+    import copy
+
+    from lensaudit.read.tables import SPECS, LensContext
+
+    spec = SPECS["vignetting"]
+    examined = copy.copy(spec)
+    examined._fast = {}  # no short path: every element examined in full
+    # A lens without problems.
+    context = LensContext(("M", "L", ("Mount",), "rectilinear", 1.5, 1.5))
+    fast = spec.row(element, context, 7)
+    full = examined.row(element, context, 7)
     assert repr(fast) == repr(full)
 
 
@@ -573,8 +583,6 @@ _CALIBRATION_VALUE = re.compile(rb'<(?:vignetting|tca|calibration)\b[^>]*?="([^"
 
 @st.composite
 def mutated_files(draw) -> tuple[str, bytes]:
-    from lensaudit.database import bundled_database_path
-
     name = draw(st.sampled_from(FUZZ_FILES))
     data = (bundled_database_path() / name).read_bytes()
     rng = draw(st.randoms(use_true_random=False))
@@ -620,7 +628,12 @@ def test_a_mutated_file_never_crashes_and_every_element_is_one_record(mutated):
     from lensaudit import tca
 
     name, data = mutated
-    vignetting_records, tca_records, error = calibrations.read_bytes(data, name)
+    tables = read_bytes(data, name, calibrations=True)
+    vignetting_records = calibrations.CalibrationRecords.of_file(
+        "vignetting", name, tables.vignetting
+    )
+    tca_records = calibrations.CalibrationRecords.of_file("tca", name, tables.tca)
+    error = tables.error
     for records, audit_entries, module in (
         (vignetting_records, vignetting.audit_entries, vignetting),
         (tca_records, tca.audit_entries, tca),

@@ -608,36 +608,12 @@ def fix_entry(
             message=f"no {entry.model} coefficients are increasing up to r = "
             f"{goal.target:.4g} and reach {goal.reach:.4g} before folding",
         )
-    for extra in range(_EXTRA_DIGITS + 1):
-        new_texts = rounded_texts(fit.coefficients, old_texts, extra)
-        new = tuple(float(t) for t in new_texts)
-        after = judge(entry.model, new, goal)
-        if after.meets_goal:
-            break
-    else:
-        new_texts = [repr(v) for v in fit.coefficients]
-        new = fit.coefficients
-        after = judge(entry.model, new, goal)
+    new_texts, new, after = _rounded_fit(entry.model, fit, old_texts, goal)
     change = change_of_distortion(entry.model, old, new, entry.aspect_ratio, goal.r_corner)
     status, message = STATUS_FIXED, ""
     if change.max_px > tolerance:
         status = STATUS_BEYOND_TOLERANCE
-        message = (
-            f"the closest {entry.model} curve without the fold changes D by up to "
-            f"{change.max_px:.0f} px over the image, more than the {tolerance:g} px "
-            f"tolerance ({FRAME} frame): the model folds at D = {before.d_max:.3g}, "
-            f"{before.r_normalized:.0%} of the image radius {goal.r_corner:.3g}"
-        )
-        if len(names) == 1:
-            message += f"; {entry.model} has a single coefficient"
-        frame_corner = float(metrics.image_corner(entry.aspect_ratio))
-        if entry.type not in ("rectilinear", "") and goal.r_corner >= frame_corner:
-            # Judged against the frame's corner: a fisheye's picture may end
-            # at an image circle short of it (one its name does not announce).
-            message += (
-                f"; the lens is of type {entry.type}: if its image circle ends inside "
-                "the frame, the fold may lie outside the picture"
-            )
+        message = _beyond_tolerance(entry, names, change, tolerance, before, goal)
     return FixResult(
         **common,
         new=new,
@@ -649,6 +625,52 @@ def fix_entry(
         status=status,
         message=message,
     )
+
+
+def _rounded_fit(
+    model: str, fit: Fit, old_texts: tuple[str, ...], goal: Goal
+) -> tuple[list[str], tuple[float, ...], Verdict]:
+    """(texts, coefficients, verdict) of the fit, rounded to the fewest extra digits
+    that still meet the goal; unrounded if none do."""
+    for extra in range(_EXTRA_DIGITS + 1):
+        new_texts = rounded_texts(fit.coefficients, old_texts, extra)
+        new = tuple(float(t) for t in new_texts)
+        after = judge(model, new, goal)
+        if after.meets_goal:
+            break
+    else:
+        new_texts = [repr(v) for v in fit.coefficients]
+        new = fit.coefficients
+        after = judge(model, new, goal)
+    return new_texts, new, after
+
+
+def _beyond_tolerance(
+    entry: DistortionEntry,
+    names: tuple[str, ...],
+    change: Change,
+    tolerance: float,
+    before: Verdict,
+    goal: Goal,
+) -> str:
+    """Why a fit that changes D by more than ``tolerance`` pixels is not a fix."""
+    message = (
+        f"the closest {entry.model} curve without the fold changes D by up to "
+        f"{change.max_px:.0f} px over the image, more than the {tolerance:g} px "
+        f"tolerance ({FRAME} frame): the model folds at D = {before.d_max:.3g}, "
+        f"{before.r_normalized:.0%} of the image radius {goal.r_corner:.3g}"
+    )
+    if len(names) == 1:
+        message += f"; {entry.model} has a single coefficient"
+    frame_corner = float(metrics.image_corner(entry.aspect_ratio))
+    if entry.type not in ("rectilinear", "") and goal.r_corner >= frame_corner:
+        # Judged against the frame's corner: a fisheye's picture may end
+        # at an image circle short of it (one its name does not announce).
+        message += (
+            f"; the lens is of type {entry.type}: if its image circle ends inside "
+            "the frame, the fold may lie outside the picture"
+        )
+    return message
 
 
 def select(

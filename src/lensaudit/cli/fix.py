@@ -112,50 +112,12 @@ def fix(
       0  done (whether or not every entry could be fixed)
       2  bad usage, or input that could not be read or patched
     """
-    from ..pipeline import run
-    from ..read import LoadError
+    from ..xmlpatch import unified_diff
 
     _check_options(target, margin, tolerance)
-    try:
-        audit = run(list(paths) or None, cache=cache)
-    except LoadError as error:
-        fail(str(error))
-    if audit.files and all(f.error for f in audit.files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
-    if write and audit.source.bundled:
-        fail(
-            "--write patches files in place: give the database PATH to patch "
-            "(the database bundled with lensfunpy is not written)"
-        )
-    from .. import fix as stage
-    from ..xmlpatch import PatchError, check_unchanged, unified_diff
-    from ..xmlpatch import write as write_patch
-
-    indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
-    try:
-        sources = stage.read_sources(audit, indices)
-        results = stage.fix_audit(
-            audit, indices, margin=margin, target=target, tolerance=tolerance, sources=sources
-        )
-        patches = [p for p in stage.patches(results, sources) if p.changed]
-    except PatchError as error:
-        fail(str(error))
-    written: list[str] = []
-    if write:
-        try:
-            # Every file is checked before any is written, so that a run
-            # refused for one changed file leaves all of them as they were.
-            for patch in patches:
-                check_unchanged(patch)
-            for patch in patches:
-                try:
-                    write_patch(patch)
-                except OSError as error:
-                    done = f" (written before it: {', '.join(written)})" if written else ""
-                    fail(f"{patch.name}: cannot write: {error.strerror or error}{done}")
-                written.append(patch.name)
-        except PatchError as error:
-            fail(str(error))
+    audit = _read_audit(paths, cache, write)
+    results, patches = _refit(audit, margin, target, tolerance, lens, focal)
+    written = _write_patches(patches) if write else []
     diff = "" if write else "".join(unified_diff(p) for p in patches)
     settings = {
         "margin": margin,
@@ -171,6 +133,73 @@ def fix(
             _write_json(audit, results, settings, diff, written, stream)
         else:
             _write_table(audit, results, settings, patches, diff, written, stream)
+
+
+def _read_audit(paths: tuple[Path, ...], cache: bool, write: bool) -> Audit:
+    """The audit of the database at ``paths``; exits with status 2 where it cannot be had
+    or (with ``write``) cannot be patched."""
+    from ..pipeline import run
+    from ..read import LoadError
+
+    try:
+        audit = run(list(paths) or None, cache=cache)
+    except LoadError as error:
+        fail(str(error))
+    if audit.files and all(f.error for f in audit.files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in audit.files))
+    if write and audit.source.bundled:
+        fail(
+            "--write patches files in place: give the database PATH to patch "
+            "(the database bundled with lensfunpy is not written)"
+        )
+    return audit
+
+
+def _refit(
+    audit: Audit,
+    margin: float,
+    target: float | None,
+    tolerance: float,
+    lens: str | None,
+    focal: float | None,
+) -> tuple[list[FixResult], list[FilePatch]]:
+    """The results for the selected entries, and the patches of the files that change."""
+    from .. import fix as stage
+    from ..xmlpatch import PatchError
+
+    indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
+    try:
+        sources = stage.read_sources(audit, indices)
+        results = stage.fix_audit(
+            audit, indices, margin=margin, target=target, tolerance=tolerance, sources=sources
+        )
+        patches = [p for p in stage.patches(results, sources) if p.changed]
+    except PatchError as error:
+        fail(str(error))
+    return results, patches
+
+
+def _write_patches(patches: list[FilePatch]) -> list[str]:
+    """Patch the files in place; the names of those written."""
+    from ..xmlpatch import PatchError, check_unchanged
+    from ..xmlpatch import write as write_patch
+
+    written: list[str] = []
+    try:
+        # Every file is checked before any is written, so that a run
+        # refused for one changed file leaves all of them as they were.
+        for patch in patches:
+            check_unchanged(patch)
+        for patch in patches:
+            try:
+                write_patch(patch)
+            except OSError as error:
+                done = f" (written before it: {', '.join(written)})" if written else ""
+                fail(f"{patch.name}: cannot write: {error.strerror or error}{done}")
+            written.append(patch.name)
+    except PatchError as error:
+        fail(str(error))
+    return written
 
 
 def _check_options(target: float | None, margin: float, tolerance: float) -> None:
@@ -198,6 +227,14 @@ def _ratio(value: float) -> str:
     return _number(value) if not math.isfinite(value) else f"{value:.3f}"
 
 
+#: Columns of the table; each result takes two rows, its old and its new coefficients.
+_TABLE_COLUMNS = (
+    "where", "lens", "focal", "model", "coefficients",
+    "r_max", "r_norm", "max px", "rms px", "status",
+)  # fmt: skip
+_TABLE_RIGHT = [False, False, True, False, False, True, True, True, True, False]
+
+
 def _write_table(
     audit: Audit,
     results: list[FixResult],
@@ -207,17 +244,10 @@ def _write_table(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from .. import __version__
     from ..fix import FRAME, PIXELS_PER_UNIT
     from ..formats.table import text_table
 
-    margin = settings["margin"]
-    lines = [f"lensaudit {__version__} fix: {audit.source.label}"]
-    chosen = " matching the filters" if settings["lens"] or settings["focal"] else ""
-    lines.append(
-        f"{len(results)} entr{'y' if len(results) == 1 else 'ies'}{chosen} with "
-        f"r_normalized < {margin:g} (D(r_max) below {margin:g} x the image radius)"
-    )
+    lines = _table_heading(audit, results, settings)
     if not results:
         stream.write("\n".join(lines) + "\n")
         return
@@ -226,51 +256,69 @@ def _write_table(
         "short side = Hugin r 1); maximum over radii 0 to the image radius, RMS over the image."
     )
     lines.append("")
-    lines += text_table(
-        [
-            "where",
-            "lens",
-            "focal",
-            "model",
-            "coefficients",
-            "r_max",
-            "r_norm",
-            "max px",
-            "rms px",
-            "status",
-        ],  # fmt: skip
-        [
-            row
-            for r in results
-            for row in (
-                [
-                    r.where,
-                    r.entry.lens,
-                    f"{r.entry.focal:g}",
-                    r.entry.model,
-                    "old " + _coefficients(r.names, r.old_texts),
-                    _number(r.r_max_before),
-                    _ratio(r.r_normalized_before),
-                    "",
-                    "",
-                    "",
-                ],
-                [
-                    "",
-                    "",
-                    "",
-                    "",
-                    "new " + _coefficients(r.names, r.new_texts),
-                    _number(r.r_max_after),
-                    _ratio(r.r_normalized_after),
-                    f"{r.max_change_px:.1f}" if r.new else "-",
-                    f"{r.rms_change_px:.1f}" if r.new else "-",
-                    r.status,
-                ],
-            )
-        ],
-        right=[False, False, True, False, False, True, True, True, True, False],
+    lines += text_table(_TABLE_COLUMNS, _table_rows(results), right=_TABLE_RIGHT)
+    lines += _table_ending(results, settings, patches, written)
+    stream.write("\n".join(lines) + "\n")
+    if diff:
+        stream.write("\n" + diff)
+
+
+def _table_heading(audit: Audit, results: list[FixResult], settings: dict[str, Any]) -> list[str]:
+    """The first lines: what was examined and how many entries were chosen."""
+    from .. import __version__
+
+    margin = settings["margin"]
+    lines = [f"lensaudit {__version__} fix: {audit.source.label}"]
+    chosen = " matching the filters" if settings["lens"] or settings["focal"] else ""
+    lines.append(
+        f"{len(results)} entr{'y' if len(results) == 1 else 'ies'}{chosen} with "
+        f"r_normalized < {margin:g} (D(r_max) below {margin:g} x the image radius)"
     )
+    return lines
+
+
+def _table_rows(results: list[FixResult]) -> list[list[str]]:
+    """Two rows per result: the old coefficients, then the new ones and the outcome."""
+    return [
+        row
+        for r in results
+        for row in (
+            [
+                r.where,
+                r.entry.lens,
+                f"{r.entry.focal:g}",
+                r.entry.model,
+                "old " + _coefficients(r.names, r.old_texts),
+                _number(r.r_max_before),
+                _ratio(r.r_normalized_before),
+                "",
+                "",
+                "",
+            ],
+            [
+                "",
+                "",
+                "",
+                "",
+                "new " + _coefficients(r.names, r.new_texts),
+                _number(r.r_max_after),
+                _ratio(r.r_normalized_after),
+                f"{r.max_change_px:.1f}" if r.new else "-",
+                f"{r.rms_change_px:.1f}" if r.new else "-",
+                r.status,
+            ],
+        )
+    ]
+
+
+def _table_ending(
+    results: list[FixResult],
+    settings: dict[str, Any],
+    patches: list[FilePatch],
+    written: list[str],
+) -> list[str]:
+    """The last lines: why entries were not fixed, the counts, and what was written."""
+    lines = []
     problems = [r for r in results if not r.fixed]
     if problems:
         lines.append("")
@@ -285,9 +333,7 @@ def _write_table(
     elif patches:
         count = len(patches)
         lines.append(f"Nothing written; --write patches {count} file{'s' if count != 1 else ''}:")
-    stream.write("\n".join(lines) + "\n")
-    if diff:
-        stream.write("\n" + diff)
+    return lines
 
 
 def _write_csv(results: list[FixResult], stream: TextIO) -> None:

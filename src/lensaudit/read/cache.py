@@ -32,6 +32,8 @@ import os
 import time
 from pathlib import Path
 
+from .paths import read_file
+
 try:  # BLAKE2 alone: hashlib would also load OpenSSL, which a warm scan does not need
     from _blake2 import blake2b
 except ImportError:  # pragma: no cover - every CPython has _blake2
@@ -45,7 +47,10 @@ _DIGEST_SIZE = 16
 _SUFFIX = ".rec"
 _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
 #: The sources whose output the cache keeps, relative to the package.
-_CODE = ("read/*.py", "normalizer.py", "solver.py", "metrics.py", "__init__.py")
+_CODE = (
+    "read/*.py", "normalizer.py", "solver/*.py", "metrics.py", "pipeline.py", "columns.py",
+    "__init__.py",
+)  # fmt: skip
 _ERRORS = (OSError, ValueError, EOFError, TypeError, KeyError, IndexError)
 
 
@@ -110,8 +115,7 @@ class Cache:
     def _load(self, digest: bytes) -> dict[str, tuple[bytes, bytes]]:
         path = self._path(digest)
         try:
-            with open(path, "rb") as stream:
-                data = stream.read()
+            data = read_file(path)  # never blocks, even on a FIFO put in its place
             head = len(_MAGIC) + _DIGEST_SIZE
             if data[: len(_MAGIC)] != _MAGIC or data[len(_MAGIC) : head] != fingerprint():
                 return {}

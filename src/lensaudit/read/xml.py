@@ -102,7 +102,7 @@ _OPTIONS = dict(
     dtd_validation=False,
     attribute_defaults=False,
     huge_tree=False,
-    remove_pis=True,
+    remove_pis=False,  # a processing instruction splits text, as in liblensfun
     # collect_ids is left on: lxml opens the external DTD without it (a FIFO named
     # as one would hang the run).
 )

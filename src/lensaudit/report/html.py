@@ -403,21 +403,6 @@ def render(
     summary = audit.summary
     rows = entry_rows(audit)
     data = script_json({"columns": [list(c) for c in ENTRY_COLUMNS], "rows": rows})
-    script_hash = base64.b64encode(hashlib.sha256(_SCRIPT.encode()).digest()).decode()
-    policy = (
-        f"default-src 'none'; script-src 'sha256-{script_hash}'; "
-        f"style-src 'unsafe-inline'; img-src data:; base-uri 'none'; form-action 'none'"
-    )
-    models = sorted({e.model for e in audit.entries if e.model})
-    statuses = list(summary.statuses)
-    total = summary.total
-    folding_rect = summary.folding_rectilinear
-    head_line = (
-        f"{summary.entries} distortion entries in {summary.files} files; "
-        f"{summary.audited} audited, {total.finite} with a finite r_max "
-        f"({total.percent_finite:.2f}%), {len(summary.folding)} folding inside "
-        f"their own image ({folding_rect} of them rectilinear)."
-    )
     comparison_html = ""
     if comparison is not None:
         comparison_html = (
@@ -425,16 +410,11 @@ def render(
             + _comparison(comparison)
             + "</section>"
         )
-    heads = "".join(
-        f'<th scope="col"{" class=n" if kind == "num" else ""} '
-        f'data-key="{key}" aria-sort="none">{escape(title)}</th>'
-        for key, title, kind in ENTRY_COLUMNS
-    )
     return f"""<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
-<meta http-equiv="Content-Security-Policy" content="{policy}">
+<meta http-equiv="Content-Security-Policy" content="{_content_security_policy()}">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="lensaudit {escape(__version__)}">
 <title>lensaudit report: {escape(provenance.database)}</title>
@@ -443,7 +423,7 @@ def render(
 <body>
 <main>
 <h1>lensaudit report</h1>
-<p id="headline">{escape(head_line)}</p>
+<p id="headline">{escape(_headline(audit))}</p>
 <p class="note">A polynomial distortion D(r) = r F(r) is invertible only up to its first local
 maximum r_max. Radii are in Hugin units: 1 is half the short side of the calibration image,
 the image corner is at hypot(aspect, 1), and a circular fisheye's image circle at 1 (the circle
@@ -468,7 +448,47 @@ the model folds inside the image when its peak stays below the corner.</p>
 </section>
 {calibrations_html}
 {comparison_html}
-<section id="all-entries"><h2>All entries</h2>
+{_all_entries(audit)}
+</main>
+<script id="entries-data" type="application/json">{data}</script>
+<script>{_SCRIPT}</script>
+</body>
+</html>
+"""
+
+
+def _content_security_policy() -> str:
+    """The page's policy: its own script (by hash) and inline style; nothing loaded."""
+    script_hash = base64.b64encode(hashlib.sha256(_SCRIPT.encode()).digest()).decode()
+    return (
+        f"default-src 'none'; script-src 'sha256-{script_hash}'; "
+        f"style-src 'unsafe-inline'; img-src data:; base-uri 'none'; form-action 'none'"
+    )
+
+
+def _headline(audit: Audit) -> str:
+    """One sentence: entries, files, how many were audited, finite and folding."""
+    summary = audit.summary
+    total = summary.total
+    folding_rect = summary.folding_rectilinear
+    return (
+        f"{summary.entries} distortion entries in {summary.files} files; "
+        f"{summary.audited} audited, {total.finite} with a finite r_max "
+        f"({total.percent_finite:.2f}%), {len(summary.folding)} folding inside "
+        f"their own image ({folding_rect} of them rectilinear)."
+    )
+
+
+def _all_entries(audit: Audit) -> str:
+    """The section of every entry: filters over an empty table the page's script fills."""
+    models = sorted({e.model for e in audit.entries if e.model})
+    statuses = list(audit.summary.statuses)
+    heads = "".join(
+        f'<th scope="col"{" class=n" if kind == "num" else ""} '
+        f'data-key="{key}" aria-sort="none">{escape(title)}</th>'
+        for key, title, kind in ENTRY_COLUMNS
+    )
+    return f"""<section id="all-entries"><h2>All entries</h2>
 {_not_audited(audit)}
 <div class="controls">
 <label>Search <input id="filter-text" type="search" placeholder="maker, lens, file"></label>
@@ -485,10 +505,4 @@ the model folds inside the image when its peak stays below the corner.</p>
 <div class="entries-box">
 <table id="entries"><thead><tr>{heads}</tr></thead><tbody></tbody></table>
 </div>
-</section>
-</main>
-<script id="entries-data" type="application/json">{data}</script>
-<script>{_SCRIPT}</script>
-</body>
-</html>
-"""
+</section>"""

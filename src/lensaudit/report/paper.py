@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
     from ..pipeline import Audit
     from ..read import FileTables
+    from ..summary import ModelCounts
 
 #: How many entries a difference line names before it says "and N more".
 NAMED = 6
@@ -185,13 +186,12 @@ def compare(
 ) -> Comparison:
     """Compare an audit with the paper's printed values, explaining each difference;
     ``omitted`` are the coefficients its entries leave out (:func:`omitted_coefficients`)."""
-    summary = audit.summary
     m = audit.metrics
     audited = audit.audited
     model = np.array([e.model for e in audit.entries], dtype=object)
     rectilinear = np.array([e.type == "rectilinear" for e in audit.entries], dtype=bool)
     finite = audited & np.isfinite(m.r_max)
-    here = {r.model: r for r in summary.rows}
+    here = {r.model: r for r in audit.summary.rows}
     paper1 = {row["model"]: row for row in values["table1"]}
     paper2 = {row["model"]: row for row in values["table2"]}
 
@@ -203,120 +203,209 @@ def compare(
 
     differences: list[str] = []
     agreements: list[str] = []
-
     same_database = all(here[name].total == paper1[name]["total"] for name in paper1)
-    if same_database:
-        agreements.append(
-            "Database: the same number of entries per model as the paper's "
-            "(" + ", ".join(f"{paper1[n]['total']} {n}" for n in MODELS) + ")."
-        )
-    else:
-        differences.append(
-            "Database version: this database has "
-            + ", ".join(f"{here[n].total} {n}" for n in MODELS)
-            + " entries, the paper's "
-            + ", ".join(f"{paper1[n]['total']} {n}" for n in MODELS)
-            + "; a different Lensfun "
-            "revision, so the counts below differ for that reason first."
-        )
+    (agreements if same_database else differences).append(
+        _database_line(here, paper1, same_database)
+    )
+    explain = _Explainer(audit, omitted_mask, same_database)
 
     table1 = []
     table2 = []
     for name in (*MODELS, TOTAL):
         r, p1, p2 = here[name], paper1[name], paper2[name]
-        table1.append(
-            (
-                name,
-                [
-                    (str(p1["finite"]), str(r.finite)),
-                    (str(p1["infinite"]), str(r.infinite)),
-                    (p1["percent_finite"], percent(r.percent_finite)),
-                    (str(p1["total"]), str(r.total)),
-                ],
-            )
-        )
-        table2.append(
-            (
-                name,
-                [
-                    (str(p2["positive"]), str(r.positive)),
-                    (str(p2["negative"]), str(r.negative)),
-                    (p2["percent_negative"], percent(r.percent_negative)),
-                    (str(p2["total"]), str(r.finite)),
-                ],
-            )
-        )
+        table1.append((name, _table1_cells(r, p1)))
+        table2.append((name, _table2_cells(r, p2)))
         mine = audited & ((model == name) if name != TOTAL else True)
-        if (r.finite, r.infinite) != (p1["finite"], p1["infinite"]):
+        differences += _table_differences(
+            explain, name, r, p1, p2, mine & finite, m.tail, emulated_counts[name]
+        )
+
+    other, found = _rectilinear_finite(explain, values, finite, rectilinear, emulated_finite)
+    differences += found
+    rows, found = _rectilinear_below_one(audit, values, finite, rectilinear, same_database)
+    other += rows
+    differences += found
+
+    for named in values["named_entries"]:
+        other_row, line = _named(audit, named)
+        other.append(other_row)
+        (differences if line.startswith("!") else agreements).append(line.lstrip("!"))
+
+    agreements.append(_arithmetic(audit, emulated, omitted_mask))
+    if _tables_match(emulated_counts, paper1, paper2) and omitted:
+        agreements.append(
+            "Reading omitted coefficients as NaN and running Algorithm 1 as printed "
+            "reproduces the paper's Tables 1 and 2 exactly."
+        )
+    return Comparison(database_name(audit), table1, table2, other, differences, agreements)
+
+
+def _database_line(
+    here: dict[str, ModelCounts], paper1: dict[str, Any], same_database: bool
+) -> str:
+    """Whether the database has the paper's number of entries per model, in one line."""
+    if same_database:
+        return (
+            "Database: the same number of entries per model as the paper's "
+            "(" + ", ".join(f"{paper1[n]['total']} {n}" for n in MODELS) + ")."
+        )
+    return (
+        "Database version: this database has "
+        + ", ".join(f"{here[n].total} {n}" for n in MODELS)
+        + " entries, the paper's "
+        + ", ".join(f"{paper1[n]['total']} {n}" for n in MODELS)
+        + "; a different Lensfun "
+        "revision, so the counts below differ for that reason first."
+    )
+
+
+def _table1_cells(r: ModelCounts, p1: dict[str, Any]) -> list[tuple[str, str]]:
+    """One model's Table 1 cells: (paper, here) for finite, infinite, %finite, total."""
+    return [
+        (str(p1["finite"]), str(r.finite)),
+        (str(p1["infinite"]), str(r.infinite)),
+        (p1["percent_finite"], percent(r.percent_finite)),
+        (str(p1["total"]), str(r.total)),
+    ]
+
+
+def _table2_cells(r: ModelCounts, p2: dict[str, Any]) -> list[tuple[str, str]]:
+    """One model's Table 2 cells: (paper, here) for positive, negative, %negative, total."""
+    return [
+        (str(p2["positive"]), str(r.positive)),
+        (str(p2["negative"]), str(r.negative)),
+        (p2["percent_negative"], percent(r.percent_negative)),
+        (str(p2["total"]), str(r.finite)),
+    ]
+
+
+@dataclass(frozen=True)
+class _Explainer:
+    """What a difference is explained against: omitted coefficients and the database."""
+
+    audit: Audit
+    omitted_mask: NDArray[np.bool_]
+    same_database: bool
+
+    def line(
+        self, head: str, counted: NDArray[np.bool_], what: str, mine: int, paper: int, emulated: int
+    ) -> str:
+        """One line: the difference and the computed reason for it."""
+        with_omitted = np.flatnonzero(counted & self.omitted_mask)
+        if with_omitted.size and mine - with_omitted.size == paper and emulated == paper:
+            return (
+                f"{head}: {with_omitted.size} of them omit a coefficient in the XML "
+                f"({_where(self.audit, with_omitted)}); liblensfun and lensaudit read it as 0 "
+                f"and find {what}; read as NaN, Algorithm 1 returns infinity for them, "
+                f"which gives the paper's {paper}."
+            )
+        if not self.same_database:
+            return f"{head}: database version (different entries; see the first line)."
+        if emulated == paper:
+            return (
+                f"{head}: the paper's Algorithm 1 in binary64 gives {emulated}, lensaudit's "
+                f"solver {mine} (arithmetic; see the solver's accuracy tests)."
+            )
+        return f"{head}: not explained by database version, omitted coefficients or arithmetic."
+
+
+def _table_differences(
+    explain: _Explainer,
+    name: str,
+    r: ModelCounts,
+    p1: dict[str, Any],
+    p2: dict[str, Any],
+    finite: NDArray[np.bool_],
+    tail: NDArray[np.int8],
+    emulated_counts: dict[str, int],
+) -> list[str]:
+    """One model's differences from the paper's Tables 1 and 2; ``finite``: its
+    audited entries with a finite r_max."""
+    differences = []
+    if (r.finite, r.infinite) != (p1["finite"], p1["infinite"]):
+        differences.append(
+            explain.line(
+                f"Table 1, {name}: finite {r.finite} here, {p1['finite']} in the paper",
+                finite,
+                "a finite r_max",
+                r.finite,
+                p1["finite"],
+                emulated_counts["finite"],
+            )
+        )
+    for column in ("positive", "negative"):
+        mine_value, paper_value = getattr(r, column), p2[column]
+        if mine_value != paper_value:
+            sign = 1 if column == "positive" else -1
+            head = f"Table 2, {name}: {column} {mine_value} here, {paper_value} in the paper"
             differences.append(
-                _explain(
-                    audit,
-                    f"Table 1, {name}: finite {r.finite} here, {p1['finite']} in the paper",
-                    mine & finite,
-                    "a finite r_max",
-                    r.finite,
-                    p1["finite"],
-                    omitted_mask,
-                    emulated_counts[name]["finite"],
-                    same_database,
+                explain.line(
+                    head,
+                    finite & (tail == sign),
+                    f"a {column} tail",
+                    mine_value,
+                    paper_value,
+                    emulated_counts[column],
                 )
             )
-        for column in ("positive", "negative"):
-            mine_value, paper_value = getattr(r, column), p2[column]
-            if mine_value != paper_value:
-                sign = 1 if column == "positive" else -1
-                head = f"Table 2, {name}: {column} {mine_value} here, {paper_value} in the paper"
-                differences.append(
-                    _explain(
-                        audit,
-                        head,
-                        mine & finite & (m.tail == sign),
-                        f"a {column} tail",
-                        mine_value,
-                        paper_value,
-                        omitted_mask,
-                        emulated_counts[name][column],
-                        same_database,
-                    )
-                )
+    return differences
 
-    other = []
+
+def _rectilinear_finite(
+    explain: _Explainer,
+    values: dict[str, Any],
+    finite: NDArray[np.bool_],
+    rectilinear: NDArray[np.bool_],
+    emulated_finite: NDArray[np.bool_],
+) -> tuple[list[tuple[str, str, str]], list[str]]:
+    """(rows, differences): rectilinear entries with a finite r_max, here and in the paper."""
     rect_finite = int((finite & rectilinear).sum())
-    other.append(
+    rows = [
         (
             "rectilinear entries with finite r_max",
             str(values["rectilinear_finite"]),
             str(rect_finite),
         )
-    )
+    ]
+    differences = []
     if rect_finite != values["rectilinear_finite"]:
         emulated_rect = int((emulated_finite & rectilinear).sum())
         differences.append(
-            _explain(
-                audit,
+            explain.line(
                 f"Rectilinear with finite r_max: {rect_finite} here, "
                 f"{values['rectilinear_finite']} in the paper",
                 finite & rectilinear,
                 "a finite r_max",
                 rect_finite,
                 values["rectilinear_finite"],
-                omitted_mask,
                 emulated_rect,
-                same_database,
             )
         )
+    return rows, differences
 
+
+def _rectilinear_below_one(
+    audit: Audit,
+    values: dict[str, Any],
+    finite: NDArray[np.bool_],
+    rectilinear: NDArray[np.bool_],
+    same_database: bool,
+) -> tuple[list[tuple[str, str, str]], list[str]]:
+    """(rows, differences): rectilinear entries with r_normalized < 1, in the paper's
+    units and in correct ones."""
+    m = audit.metrics
     with np.errstate(invalid="ignore"):
         below_paper = np.flatnonzero(finite & rectilinear & (m.r_normalized_paper < 1))
         below = np.flatnonzero(finite & rectilinear & (m.r_normalized < 1))
-    other.append(
+    rows = [
         (
             "rectilinear entries with r_normalized < 1, paper's units",
             str(values["rectilinear_below_one"]),
             str(below_paper.size),
-        )
-    )
-    other.append(("rectilinear entries with r_normalized < 1, correct units", "", str(below.size)))
+        ),
+        ("rectilinear entries with r_normalized < 1, correct units", "", str(below.size)),
+    ]
+    differences = []
     if below_paper.size != values["rectilinear_below_one"]:
         differences.append(
             f"Rectilinear entries below 1 in the paper's units: {below_paper.size} here "
@@ -336,26 +425,20 @@ def compare(
             f"Eq. 29 corner hypot(18, 12) / (crop * focal) is in focal-length units and agrees "
             f"with the Hugin-unit corner only where crop * focal is near 12 mm (3:2 images)."
         )
+    return rows, differences
 
-    for named in values["named_entries"]:
-        other_row, line = _named(audit, named)
-        other.append(other_row)
-        (differences if line.startswith("!") else agreements).append(line.lstrip("!"))
 
-    agreements.append(_arithmetic(audit, emulated, omitted_mask))
-    tables_match = all(
+def _tables_match(
+    emulated_counts: dict[str, dict[str, int]], paper1: dict[str, Any], paper2: dict[str, Any]
+) -> bool:
+    """Whether Algorithm 1 as the paper ran it gives every count of its Tables 1 and 2."""
+    return all(
         emulated_counts[n]["finite"] == paper1[n]["finite"]
         and emulated_counts[n]["infinite"] == paper1[n]["infinite"]
         and emulated_counts[n]["positive"] == paper2[n]["positive"]
         and emulated_counts[n]["negative"] == paper2[n]["negative"]
         for n in (*MODELS, TOTAL)
     )
-    if tables_match and omitted:
-        agreements.append(
-            "Reading omitted coefficients as NaN and running Algorithm 1 as printed "
-            "reproduces the paper's Tables 1 and 2 exactly."
-        )
-    return Comparison(database_name(audit), table1, table2, other, differences, agreements)
 
 
 def database_name(audit: Audit) -> str:
@@ -370,36 +453,6 @@ def database_name(audit: Audit) -> str:
 def _name(audit: Audit, index: int) -> str:
     entry = audit.entries[index]
     return f"{entry.lens} at {entry.focal:g} mm ({entry.file}:{entry.line})"
-
-
-def _explain(
-    audit: Audit,
-    head: str,
-    counted: NDArray[np.bool_],
-    what: str,
-    mine: int,
-    paper: int,
-    omitted_mask: NDArray[np.bool_],
-    emulated: int,
-    same_database: bool,
-) -> str:
-    """One line: the difference and the computed reason for it."""
-    with_omitted = np.flatnonzero(counted & omitted_mask)
-    if with_omitted.size and mine - with_omitted.size == paper and emulated == paper:
-        return (
-            f"{head}: {with_omitted.size} of them omit a coefficient in the XML "
-            f"({_where(audit, with_omitted)}); liblensfun and lensaudit read it as 0 "
-            f"and find {what}; read as NaN, Algorithm 1 returns infinity for them, "
-            f"which gives the paper's {paper}."
-        )
-    if not same_database:
-        return f"{head}: database version (different entries; see the first line)."
-    if emulated == paper:
-        return (
-            f"{head}: the paper's Algorithm 1 in binary64 gives {emulated}, lensaudit's "
-            f"solver {mine} (arithmetic; see the solver's accuracy tests)."
-        )
-    return f"{head}: not explained by database version, omitted coefficients or arithmetic."
 
 
 def _named(audit: Audit, named: dict[str, Any]) -> tuple[tuple[str, str, str], str]:

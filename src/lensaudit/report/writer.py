@@ -22,6 +22,8 @@ from .. import __version__
 if TYPE_CHECKING:
     from ..pipeline import Audit
     from .audits import ReportAudits
+    from .histogram import Histogram
+    from .provenance import Provenance
 
 #: Files of every report, in the order they are written.
 REPORT_FILES = (
@@ -121,23 +123,15 @@ def write_report(
     With ``paper_values`` (see :func:`lensaudit.report.paper.load_values`)
     the paper comparison is added. Returns the paths written.
     """
-    from ..formats import writer
     from . import calibrations, figures, histogram, html, provenance, tables
 
-    audit, vignetting_audit, tca_audit = audits.distortion, audits.vignetting, audits.tca
+    audit = audits.distortion
     directory = Path(directory)
-    names = planned_files(paper_values is not None)
-    if directory.exists() and not directory.is_dir():
-        raise NotADirectoryError(f"{directory} exists and is not a directory")
-    existing = [n for n in names if (directory / n).exists()]
-    if existing and not force:
-        raise ReportExistsError(directory, existing)
-    directory.mkdir(parents=True, exist_ok=True)
+    _prepare_directory(directory, planned_files(paper_values is not None), force)
 
-    summary = audit.summary
     facts = provenance.collect(audit)
-    table1 = tables.table1_rows(summary)
-    table2 = tables.table2_rows(summary)
+    table1 = tables.table1_rows(audit.summary)
+    table2 = tables.table2_rows(audit.summary)
     fig5 = histogram.figure5(audit)
     comparison = None
     if paper_values is not None:
@@ -147,46 +141,8 @@ def write_report(
             audit, paper_values, paper.omitted_coefficients(audit, audits.files)
         )
 
-    buffer = io.StringIO()
-    writer("csv")(audit, buffer)
-    texts = {
-        "entries.csv": buffer.getvalue(),
-        "summary.json": json.dumps(
-            _json_ready(
-                {
-                    "lensaudit": __version__,
-                    # Without the date: the same database gives the same bytes.
-                    # The date is on report.html only.
-                    "provenance": {k: v for k, v in facts.to_dict().items() if k != "generated"},
-                    "summary": summary.to_dict(),
-                    "figure5": {
-                        "population": histogram.POPULATION,
-                        "entries": fig5.entries,
-                        "below_one": fig5.below_one,
-                        "below_one_paper": fig5.below_one_paper,
-                    },
-                    "folding": [
-                        f"{audit.entries[i].file}:{audit.entries[i].line}" for i in summary.folding
-                    ],
-                }
-            ),
-            indent=1,
-            allow_nan=False,
-        )
-        + "\n",
-        "table1.md": tables.to_markdown(tables.TABLE1_HEADER, table1, tables.TABLE1_CAPTION),
-        "table1.csv": tables.to_csv(tables.TABLE1_HEADER, table1),
-        "table2.md": tables.to_markdown(tables.TABLE2_HEADER, table2, tables.TABLE2_CAPTION),
-        "table2.csv": tables.to_csv(tables.TABLE2_HEADER, table2),
-        "folding.csv": tables.csv_text(FOLDING_COLUMNS, folding_columns(audit)),
-        "vignetting.csv": calibrations.csv_text(vignetting_audit),
-        "tca.csv": calibrations.csv_text(tca_audit),
-        "fig5_r_normalized.csv": tables.csv_text(
-            ("bin_low", "bin_high", "count", "count_paper_units"), zip(*fig5.rows(), strict=True)
-        ),
-    }
     written = []
-    for name, text in texts.items():
+    for name, text in _data_files(audits, facts, table1, table2, fig5).items():
         _write_text(directory / name, text)
         written.append(directory / name)
 
@@ -205,7 +161,7 @@ def write_report(
         table1,
         table2,
         comparison,
-        calibrations.section(vignetting_audit, tca_audit),
+        calibrations.section(audits.vignetting, audits.tca),
     )
     _write_text(directory / "report.html", page)
     written.append(directory / "report.html")
@@ -215,3 +171,66 @@ def write_report(
         _write_text(directory / PAPER_FILE, paper.markdown(comparison))
         written.append(directory / PAPER_FILE)
     return written
+
+
+def _prepare_directory(directory: Path, names: list[str], force: bool) -> None:
+    """Create ``directory``; refuse one that holds any of ``names``, unless ``force``."""
+    if directory.exists() and not directory.is_dir():
+        raise NotADirectoryError(f"{directory} exists and is not a directory")
+    existing = [n for n in names if (directory / n).exists()]
+    if existing and not force:
+        raise ReportExistsError(directory, existing)
+    directory.mkdir(parents=True, exist_ok=True)
+
+
+def _data_files(
+    audits: ReportAudits,
+    facts: Provenance,
+    table1: list[tuple[Any, ...]],
+    table2: list[tuple[Any, ...]],
+    fig5: Histogram,
+) -> dict[str, str]:
+    """The report's text files other than report.html, by name, in the order written."""
+    from ..formats import writer
+    from . import calibrations, tables
+
+    audit = audits.distortion
+    buffer = io.StringIO()
+    writer("csv")(audit, buffer)
+    return {
+        "entries.csv": buffer.getvalue(),
+        "summary.json": _summary_json(audit, facts, fig5),
+        "table1.md": tables.to_markdown(tables.TABLE1_HEADER, table1, tables.TABLE1_CAPTION),
+        "table1.csv": tables.to_csv(tables.TABLE1_HEADER, table1),
+        "table2.md": tables.to_markdown(tables.TABLE2_HEADER, table2, tables.TABLE2_CAPTION),
+        "table2.csv": tables.to_csv(tables.TABLE2_HEADER, table2),
+        "folding.csv": tables.csv_text(FOLDING_COLUMNS, folding_columns(audit)),
+        "vignetting.csv": calibrations.csv_text(audits.vignetting),
+        "tca.csv": calibrations.csv_text(audits.tca),
+        "fig5_r_normalized.csv": tables.csv_text(
+            ("bin_low", "bin_high", "count", "count_paper_units"), zip(*fig5.rows(), strict=True)
+        ),
+    }
+
+
+def _summary_json(audit: Audit, facts: Provenance, fig5: Histogram) -> str:
+    """``summary.json``: provenance without the date, the summary, Figure 5's counts
+    and where the folding entries are."""
+    from . import histogram
+
+    summary = audit.summary
+    document = {
+        "lensaudit": __version__,
+        # Without the date: the same database gives the same bytes.
+        # The date is on report.html only.
+        "provenance": {k: v for k, v in facts.to_dict().items() if k != "generated"},
+        "summary": summary.to_dict(),
+        "figure5": {
+            "population": histogram.POPULATION,
+            "entries": fig5.entries,
+            "below_one": fig5.below_one,
+            "below_one_paper": fig5.below_one_paper,
+        },
+        "folding": [f"{audit.entries[i].file}:{audit.entries[i].line}" for i in summary.folding],
+    }
+    return json.dumps(_json_ready(document), indent=1, allow_nan=False) + "\n"

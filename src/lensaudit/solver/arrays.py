@@ -128,6 +128,39 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     Coefficients are at most 1 in magnitude (scaled per degree by :func:`_solve`).
     """
     size = A.shape[0]
+    has_critical, root_disc, x_max, x_min = _critical_points(A, B)
+    # Is the local minimum below zero? Then the largest crossing root lies to
+    # its right; otherwise, left of the local maximum.
+    q_at_min = _q_at_local_minimum(x_min, has_critical, A, B, C)
+    right = has_critical & (q_at_min < 0)
+    left = has_critical & ~right
+
+    # Is that root positive? q increases through it from its bracket's lower end.
+    positive = np.where(right, (x_min >= 0) | (C < 0), np.where(left, (x_max > 0) & (C < 0), C < 0))
+    result = np.zeros(size)
+    work = np.flatnonzero(positive)
+    if work.size == 0:
+        return result
+    A, B, C = A[work], B[work], C[work]
+    right, left = right[work], left[work]
+    x_max, x_min, root_disc, q_at_min = x_max[work], x_min[work], root_disc[work], q_at_min[work]
+
+    guess, lower, upper = _newton_start(A, B, C, right, left, x_max, x_min, root_disc, q_at_min)
+    x, settled = _plain_newton(guess, A, B, C)
+    result[work] = x
+    polish = np.flatnonzero(~settled)
+    if polish.size:
+        result[work[polish]] = _polish(
+            x[polish], lower[polish], upper[polish], A[polish], B[polish], C[polish]
+        )
+    return result
+
+
+def _critical_points(
+    A: FloatArray, B: FloatArray
+) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, FloatArray]:
+    """(has_critical, root_disc, x_max, x_min) of q: whether it has a local maximum
+    and minimum, sqrt(A^2 - 3B) (0 where it has none), and where they lie."""
     # Critical points of q: 3x^2 + 2A x + B = 0, x = (-A -+ sqrt(A^2 - 3B)) / 3.
     critical_disc = A * A - 3 * B
     has_critical = critical_disc > 0
@@ -137,10 +170,15 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     second = B / np.where(big != 0, big, 1.0)
     x_max = np.minimum(first, second)  # local maximum of q
     x_min = np.maximum(first, second)  # local minimum of q
+    return has_critical, root_disc, x_max, x_min
 
-    # Is the local minimum below zero? Then the largest crossing root lies to
-    # its right; otherwise, left of the local maximum. Decide with plain
-    # arithmetic where its error bound allows, else compensated, else exactly.
+
+def _q_at_local_minimum(
+    x_min: FloatArray, has_critical: NDArray[np.bool_], A: FloatArray, B: FloatArray, C: FloatArray
+) -> FloatArray:
+    """q(x_min), its sign certain wherever q has critical points."""
+    # Decide with plain arithmetic where its error bound allows, else
+    # compensated, else exactly.
     q_at_min = _q_plain(x_min, A, B, C)
     # With C = 0 and the minimum at x = 0 (so B = 0 too), q = x^2 (x + A) touches
     # zero exactly there: certain, and common (Lensfun's poly3, ptlens with a = 0).
@@ -159,20 +197,22 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
             sign = _exact_discriminant_sign(float(As[i]), float(Bs[i]), float(Cs[i]))
             precise[i] = -1.0 if sign > 0 else 1.0
         q_at_min[uncertain] = precise
-    right = has_critical & (q_at_min < 0)
-    left = has_critical & ~right
-    monotone = ~has_critical
+    return q_at_min
 
-    # Is that root positive? q increases through it from its bracket's lower end.
-    positive = np.where(right, (x_min >= 0) | (C < 0), np.where(left, (x_max > 0) & (C < 0), C < 0))
-    result = np.zeros(size)
-    work = np.flatnonzero(positive)
-    if work.size == 0:
-        return result
-    A, B, C = A[work], B[work], C[work]
-    right, left, monotone = right[work], left[work], monotone[work]
-    x_max, x_min, root_disc, q_at_min = x_max[work], x_min[work], root_disc[work], q_at_min[work]
 
+def _newton_start(
+    A: FloatArray,
+    B: FloatArray,
+    C: FloatArray,
+    right: NDArray[np.bool_],
+    left: NDArray[np.bool_],
+    x_max: FloatArray,
+    x_min: FloatArray,
+    root_disc: FloatArray,
+    q_at_min: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(guess, lower, upper): a start for Newton's method and a bracket around the root
+    (right of the local minimum, left of the local maximum, or q monotone)."""
     # A start on the side of the root from which Newton's method converges
     # monotonically: q is convex right of its inflection point, concave left.
     q_at_max = _q_plain(x_max, A, B, C)
@@ -199,7 +239,13 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     guess = np.where(
         np.isfinite(guess) & (guess >= lower) & (guess <= upper), guess, (lower + upper) / 2
     )
+    return guess, lower, upper
 
+
+def _plain_newton(
+    guess: FloatArray, A: FloatArray, B: FloatArray, C: FloatArray
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """(x, settled): x after plain Newton steps from guess; settled where x needs no polish."""
     # Plain Newton steps: fast, and enough where the root is well conditioned.
     x = guess
     step = np.zeros_like(x)
@@ -212,13 +258,7 @@ def _min_root_scaled(A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
     settled = (np.abs(step) <= 1e-8 * np.abs(x)) & (
         _magnitude(x, A, B, C) <= _WELL_CONDITIONED * slope
     )
-    result[work] = x
-    polish = np.flatnonzero(~settled)
-    if polish.size:
-        result[work[polish]] = _polish(
-            x[polish], lower[polish], upper[polish], A[polish], B[polish], C[polish]
-        )
-    return result
+    return x, settled
 
 
 def _magnitude(x: FloatArray, A: FloatArray, B: FloatArray, C: FloatArray) -> FloatArray:
