@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from lensaudit.check import check  # noqa: E402
-from lensaudit.loader import LoadError  # noqa: E402
+from lensaudit.read import LoadError  # noqa: E402
 
 #: Where a Lensfun repository keeps its database.
 DB_DIR = "data/db"

@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import lens_xml
-from lensaudit import console
+from lensaudit import commands, console
 from lensaudit.cli import main
 from lensaudit.cli.scan import scan as scan_command
 from lensaudit.console import ScanArguments, scan_arguments
@@ -29,8 +29,8 @@ def test_scan_options_are_the_commands_own():
     options = [p for p in scan_command.params if isinstance(p, click.Option)]
     names = {name: option.is_flag for option in options for name in option.opts}
     names |= {name: True for option in options for name in option.secondary_opts}
-    assert set(console.SCAN_OPTIONS) == set(names)
-    assert {name for name, flag in names.items() if flag} == set(console.SCAN_FLAGS)
+    assert set(commands.SCAN_OPTIONS) == set(names)
+    assert {name for name, flag in names.items() if flag} == set(commands.SCAN_FLAGS)
 
 
 WORD = st.sampled_from(

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from benchmarks.scan import lensaudit_command
 from lensaudit import calibrations, tca, vignetting
-from lensaudit.database import bundled_database_path
+from lensaudit.read.paths import bundled_database_path
 
 TITLE = "calibrations: vignetting and TCA audits of whole databases"
 
@@ -41,15 +41,16 @@ def _command(*arguments: str) -> list[str]:
 
 
 def _in_process_rows(name: str, database: Path, repeats: int) -> list[dict]:
-    source, loaded = calibrations.load(database)
+    loaded = calibrations.load(database)
     read = _median_seconds(lambda: calibrations.load(database), repeats)
-    audit_v = _median_seconds(lambda: vignetting.from_load(loaded, source), repeats)
-    audit_t = _median_seconds(lambda: tca.from_load(loaded, source), repeats)
+    audit_v = _median_seconds(lambda: vignetting.of_database(loaded), repeats)
+    audit_t = _median_seconds(lambda: tca.of_database(loaded), repeats)
+    counts = {kind: len(loaded.rows(kind)[1]) for kind in ("vignetting", "tca")}
     rows = []
     for what, entries, seconds in (
-        ("read <vignetting> and <tca>", len(loaded.vignetting) + len(loaded.tca), read),
-        ("audit vignetting", len(loaded.vignetting), audit_v),
-        ("audit TCA", len(loaded.tca), audit_t),
+        ("read every element (distortion, vignetting, TCA)", sum(counts.values()), read),
+        ("audit vignetting", counts["vignetting"], audit_v),
+        ("audit TCA", counts["tca"], audit_t),
     ):
         rows.append(
             {

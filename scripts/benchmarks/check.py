@@ -55,7 +55,7 @@ def in_process(repeats: int, warm_cache: str) -> dict[str, float]:
 
 
 def run(quick: bool) -> list[dict]:
-    from lensaudit.database import bundled_database_path
+    from lensaudit.read.paths import bundled_database_path
 
     turns = 5 if quick else 15
     compile_bytecode()

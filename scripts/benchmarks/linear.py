@@ -26,8 +26,8 @@ TITLE = "Cost per entry as the database grows (scan -f csv, copies of the bundle
 COPIES = (1, 4, 16, 64)
 # The lensaudit command, with the cache's size bound out of the way.
 LAUNCH = (
-    "import lensaudit.cache\n"
-    "lensaudit.cache.MAX_CACHE_BYTES = 1 << 40\n"
+    "import lensaudit.read.cache\n"
+    "lensaudit.read.cache.MAX_BYTES = 1 << 40\n"
     "from lensaudit.console import run\n"
     "run()\n"
 )
@@ -46,7 +46,7 @@ def build(directory: Path, source: Path, copies: int) -> int:
 
 
 def run(quick: bool) -> list[dict]:
-    from lensaudit.database import bundled_database_path
+    from lensaudit.read.paths import bundled_database_path
 
     repeats = 1 if quick else 3
     compile_bytecode()

@@ -17,8 +17,8 @@ import time
 import numpy as np
 
 from lensaudit import normalizer
-from lensaudit.database import bundled_database_path
-from lensaudit.loader import load
+from lensaudit.read import read as load
+from lensaudit.read.paths import bundled_database_path
 from lensaudit.solver import (
     PATHS,
     min_positive_root,
@@ -30,7 +30,7 @@ TITLE = "Solver throughput (cubics per second, one core)"
 
 
 def database_cubics() -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    entries = [e for e in load(bundled_database_path()).entries if e.status == "ok"]
+    entries = [e for e in load(bundled_database_path()).entries() if e.status == "ok"]
     by_model: dict[str, list] = {}
     for e in entries:
         by_model.setdefault(e.model, []).append(e)

@@ -8,10 +8,11 @@ database and compares it with the image corner.
 >>> frame = lensaudit.audit()            # the database bundled with lensfunpy
 >>> frame[frame.folds_in_image]          # entries that fold inside the image
 
-The submodules follow the pipeline: :mod:`~lensaudit.loader` (XML to
-entries), :mod:`~lensaudit.normalizer` (models to cubic form),
-:mod:`~lensaudit.solver` (r_max), :mod:`~lensaudit.metrics` and
-:mod:`~lensaudit.summary`, then :mod:`~lensaudit.formats`.
+The submodules follow the pipeline (:mod:`~lensaudit.pipeline`):
+:mod:`~lensaudit.read` (files to tables, the only code that reads XML),
+:mod:`~lensaudit.normalizer` (models to cubic form), :mod:`~lensaudit.solver`
+(r_max), :mod:`~lensaudit.metrics` and :mod:`~lensaudit.summary`, then
+:mod:`~lensaudit.formats`.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-__version__ = "0.1.0"
+from .version import __version__
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False

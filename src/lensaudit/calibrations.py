@@ -585,7 +585,7 @@ class CalibrationAudit:
     def head_lines(self, summary: dict[str, Any], entries: str) -> list[str]:
         """The first two lines of the terminal summary: the database, and the
         counts of files and of ``entries`` (say, "TCA entries") read and audited."""
-        from . import __version__
+        from .version import __version__
 
         files = summary["files"]
         return [
@@ -623,7 +623,7 @@ class CalibrationAudit:
 
     def document(self) -> dict[str, Any]:
         """The JSON document as Python data (strict JSON: inf as "inf", NaN as null)."""
-        from . import __version__
+        from .version import __version__
 
         def clean(value: Any) -> Any:
             if isinstance(value, float):

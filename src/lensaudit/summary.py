@@ -18,9 +18,16 @@ from .read.records import MODEL_COEFFICIENTS, STATUS_OK
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import Any
+    from typing import Any, Protocol
 
-    from .pipeline import Audit
+    class Audit(Protocol):
+        """What a summary needs of an audit (see :class:`lensaudit.pipeline.Audit`)."""
+
+        files: list
+
+        def __len__(self) -> int: ...
+        def entry_column(self, name: str) -> list: ...
+        def metric_columns(self) -> dict[str, list]: ...
 
 MODELS = tuple(MODEL_COEFFICIENTS)
 TOTAL = "Total"

@@ -13,7 +13,7 @@ import json
 import math
 from typing import TYPE_CHECKING, Any, TextIO
 
-from .. import __version__
+from ..version import __version__
 
 if TYPE_CHECKING:
     from ..check import CheckResult

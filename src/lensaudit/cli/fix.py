@@ -265,7 +265,7 @@ def _write_table(
 
 def _table_heading(audit: Audit, results: list[FixResult], settings: dict[str, Any]) -> list[str]:
     """The first lines: what was examined and how many entries were chosen."""
-    from .. import __version__
+    from ..version import __version__
 
     margin = settings["margin"]
     lines = [f"lensaudit {__version__} fix: {audit.source.label}"]
@@ -361,8 +361,8 @@ def _write_json(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from .. import __version__
     from ..fix import FRAME, PIXELS_PER_UNIT, RECORD_COLUMNS
+    from ..version import __version__
 
     entries = []
     for result in results:

@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 # Shared with the click-free scan of the console command.
-from ..console import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream
+from ..commands import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream
 
 __all__ = [
     "EXIT_INPUT_ERROR",

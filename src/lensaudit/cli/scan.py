@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..console import KIND_NAMES
+from ..commands import KIND_NAMES
 from .options import cache_option, database_paths, format_option, output_file
 
 
@@ -67,8 +67,8 @@ def scan(
     (vignetting, tca), status and message; see docs/vignetting.md. The
     cache serves distortion only.
     """
-    from ..console import ScanArguments
-    from ..console import scan as run_scan
+    from ..commands import ScanArguments
+    from ..commands import scan as run_scan
 
     run_scan(
         ScanArguments(

@@ -16,7 +16,6 @@ import json
 import math
 from json.encoder import encode_basestring_ascii
 
-from .. import __version__
 from ..columns import (
     COLUMNS,
     FLOAT_COLUMNS,
@@ -26,6 +25,7 @@ from ..columns import (
     TRAILING_COLUMNS,
     float_texts,
 )
+from ..version import __version__
 from . import interleaved, metric_fields
 
 # typing only for type checkers: a scan from the cache never imports it.

@@ -77,7 +77,7 @@ def cache_dir() -> Path:
 @functools.cache
 def fingerprint() -> bytes:
     """What records are valid for: the version and the code that makes them."""
-    from .. import __version__
+    from ..version import __version__
 
     package = Path(__file__).resolve().parent.parent
     digest = blake2b(f"lensaudit {__version__}".encode(), digest_size=_DIGEST_SIZE)

@@ -16,7 +16,7 @@ import math
 from html import escape
 from typing import TYPE_CHECKING, Any
 
-from .. import __version__
+from ..version import __version__
 from . import curves
 from .tables import TABLE1_CAPTION, TABLE1_HEADER, TABLE2_CAPTION, TABLE2_HEADER
 

@@ -12,8 +12,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import __version__
 from ..read.paths import lensfunpy_version, timestamp
+from ..version import __version__
 
 if TYPE_CHECKING:
     from ..pipeline import Audit

@@ -88,7 +88,7 @@ def _cube_root_above(y: FloatArray) -> FloatArray:
 
     numpy's cbrt differs from one machine to the next (SIMD versions round
     differently), and the fast path's answer must be the same float wherever
-    it runs (:mod:`lensaudit.scalar` repeats it): the power of two 2^k just
+    it runs (:mod:`lensaudit.solver.kernel` repeats it): the power of two 2^k just
     above cbrt(y) (at most twice it), then two of Newton's steps, which
     approach the root from above.
     """

@@ -1,7 +1,9 @@
-"""The metrics of one entry at a time in plain Python, where the solver's fast path proves them.
+"""The solver's private kernel: the metrics of one entry at a time in plain
+Python, where the solver's fast path proves them.
 
 :func:`lensaudit.metrics.compute` works on numpy arrays; importing numpy
 takes a fresh ``lensaudit scan`` about as long as parsing the database.
+The kernel shares the array code's constants (:mod:`lensaudit.solver.constants`).
 :func:`entry_metrics` gives the same metrics for one audited entry without
 numpy, operation for operation as the array code computes them (the same
 IEEE operations on the same values, in the same order), so that its results
@@ -404,7 +406,7 @@ _INPUTS = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "f
 
 
 def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | None:
-    """The metrics of entries given as columns (as :func:`lensaudit.loader.row_columns`
+    """The metrics of entries given as columns (as :func:`lensaudit.pipeline.row_columns`
     gives them), as lists by metric column (``tail`` -1/0/1, ``folds_in_image`` 0/1);
     only entries whose ``status`` is ``audited`` are computed. None if any of
     them is left to the array code."""

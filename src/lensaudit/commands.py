@@ -1,0 +1,193 @@
+"""What lensaudit's commands share without click: the plain scan, output, errors.
+
+``lensaudit scan`` is the command run most, often on a cold start, where
+importing click and building its commands is a fifth of the work: :func:`scan_arguments`
+reads a plain scan's command line and :func:`scan` runs it, for the
+console command (:mod:`lensaudit.console`) and for the click command alike.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections import namedtuple
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+# typing only for type checkers: a scan from the cache never imports it.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import NoReturn, TextIO
+
+#: Exit status for bad usage or input that could not be read at all.
+EXIT_INPUT_ERROR = 2
+#: The output formats of the commands that write every entry (scan, fix).
+FORMAT_NAMES = ("table", "csv", "json")
+#: What ``scan --kind`` audits.
+KIND_NAMES = ("distortion", "vignetting", "tca")
+
+#: The options of ``lensaudit scan``: name -> the field of :class:`ScanArguments` it sets.
+SCAN_OPTIONS: dict[str, str] = {
+    "-f": "output_format",
+    "--format": "output_format",
+    "-k": "kind",
+    "--kind": "kind",
+    "-o": "output",
+    "--output": "output",
+    "--cache": "cache",
+    "--no-cache": "cache",
+}
+#: Of those, the flags (the others take a value).
+SCAN_FLAGS = ("--cache", "--no-cache")
+
+
+class ScanArguments(
+    namedtuple(
+        "ScanArguments",
+        ("paths", "output_format", "kind", "output", "cache"),
+        defaults=((), "table", "distortion", None, True),
+    )
+):
+    """A scan's command line: database ``paths`` as given (a tuple; none: the
+    default database), ``output_format``, ``kind``, ``output`` file (None:
+    standard output), ``cache`` (a bool)."""
+
+    __slots__ = ()
+
+
+def scan_arguments(words: list[str]) -> ScanArguments | None:
+    """What ``lensaudit scan WORDS...`` asks for, or None unless that is plain:
+    help asked for, an option or value that click would refuse, an output
+    that is a directory."""
+    paths: list[str] = []
+    settings: dict[str, object] = {}
+    rest = iter(words)
+    for word in rest:
+        if word == "--":
+            paths += rest
+            break
+        if not word.startswith("-") or word == "-":
+            paths.append(word)
+            continue
+        if word.startswith("--"):
+            name, equals, value = word.partition("=")
+        else:  # a short option's value follows it at once, "=" included: -fcsv, -o=x
+            name, equals, value = word[:2], word[2:3], word[2:]
+        setting = SCAN_OPTIONS.get(name)
+        if setting is None:
+            return None
+        if name in SCAN_FLAGS:
+            if equals:
+                return None
+            settings["cache"] = name == "--cache"
+            continue
+        if not equals:
+            value = next(rest, None)
+            if value is None:
+                return None
+        settings[setting] = value
+    found = ScanArguments(tuple(paths), **settings)  # type: ignore[arg-type]
+    if found.output_format not in FORMAT_NAMES or found.kind not in KIND_NAMES:
+        return None
+    if found.output is not None and (not found.output or os.path.isdir(found.output)):
+        return None  # click's own message says what is wrong with it
+    return found
+
+
+def fail(message: str) -> NoReturn:
+    """Print a one-line error and exit with status 2 (no traceback)."""
+    sys.stderr.write(f"lensaudit: error: {message}\n")
+    sys.stderr.flush()
+    sys.exit(EXIT_INPUT_ERROR)
+
+
+def os_error_message(error: OSError) -> str:
+    """The one line an error of the file system is reported with."""
+    from .read.paths import display_path
+
+    where = f"{display_path(error.filename)}: " if error.filename is not None else ""
+    return f"lensaudit: error: {where}{error.strerror or error}"
+
+
+@contextmanager
+def output_stream(path: Path | str | None) -> Iterator[TextIO]:
+    """Standard output, or ``path`` opened for writing (UTF-8)."""
+    if path is None or str(path) == "-":
+        yield sys.stdout
+        return
+    try:
+        stream = open(path, "w", encoding="utf-8", newline="")  # noqa: SIM115
+    except OSError as error:
+        fail(f"cannot write {path}: {error.strerror or error}")
+    with stream:
+        yield stream
+
+
+def single_blas_thread() -> None:
+    """Ask numpy's BLAS, if this process is the one to load it, for one thread.
+
+    The audits do no linear algebra, and starting a BLAS thread pool makes
+    importing numpy slower (much slower on a busy machine). Only this
+    process is affected, and only when the user has not chosen.
+    """
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def scan(arguments: ScanArguments) -> None:
+    """Run ``lensaudit scan`` (see ``lensaudit scan --help``)."""
+    import gc
+
+    from .read.records import LoadError
+
+    paths = [Path(path) for path in arguments.paths]
+    output = None if arguments.output is None else Path(arguments.output)
+    single_blas_thread()
+    collecting = gc.isenabled()
+    # What the scan allocates lives until it ends: the cycle collector would
+    # only walk it over and over (a tenth of importing numpy, for one).
+    gc.disable()
+    try:
+        if arguments.kind != "distortion":
+            _scan_calibrations(paths, arguments.output_format, arguments.kind, output)
+            return
+        from .formats import writer
+        from .pipeline import run as audit
+
+        try:
+            result = audit(paths or None, cache=arguments.cache)
+        except LoadError as error:
+            fail(str(error))
+        if result.files and all(f.error for f in result.files):
+            fail(
+                "no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in result.files)
+            )
+        with output_stream(output) as stream:
+            writer(arguments.output_format)(result, stream)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _scan_calibrations(
+    paths: list[Path], output_format: str, kind: str, output: Path | None
+) -> None:
+    """``scan --kind vignetting|tca``: read the elements of that kind and audit them."""
+    from importlib import import_module
+
+    from .calibrations import load
+    from .read.records import LoadError
+
+    try:
+        database = load(paths or None)
+    except LoadError as error:
+        fail(str(error))
+    files = database.files
+    if files and all(f.error for f in files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
+    audit = import_module(f"lensaudit.{kind}").of_database(database)
+    with output_stream(output) as stream:
+        audit.write(output_format, stream)
+
+
