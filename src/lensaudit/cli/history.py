@@ -58,7 +58,8 @@ from .options import fail
     metavar="DIR",
     type=click.Path(path_type=Path),
     default=None,
-    help="Cache of audited file versions kept between runs [default: the user cache directory].",
+    help="Directory of lensaudit's cache, which keeps each file version read and the last "
+    "run [default: $LENSAUDIT_CACHE_DIR, else ~/.cache/lensaudit].",
 )
 @click.option("--no-cache", is_flag=True, help="Neither read nor write the cache.")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
@@ -91,16 +92,13 @@ def history(
 
     A progress bar is drawn when standard error is a terminal.
     """
-    from ..history import HistoryError, audit_history, default_cache_dir
+    from ..history import HistoryError, audit_history
 
     try:
         output_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         fail(f"cannot create {output_dir}: {error.strerror or error}")
-    if no_cache:
-        cache_dir = None
-    elif cache_dir is None:
-        cache_dir = default_cache_dir()
+    cache: bool | Path = False if no_cache else cache_dir or True
     bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
     try:
         result = audit_history(
@@ -110,7 +108,7 @@ def history(
             since=since,
             until=until,
             first_parent=first_parent,
-            cache_dir=cache_dir,
+            cache=cache,
             progress=bar.update,
         )
     except HistoryError as error:
@@ -120,7 +118,7 @@ def history(
     for warning in result.warnings:
         click.echo(f"lensaudit: warning: {warning}", err=True)
 
-    written = _write_outputs(result, output_dir, cache_dir)
+    written = _write_outputs(result, output_dir, cache)
     if not quiet:
         _print_summary(result, written)
 
@@ -148,7 +146,7 @@ class _ProgressBar:
             self.bar = None
 
 
-def _write_outputs(result, output_dir: Path, cache_dir: Path | None) -> list[Path]:
+def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
     import io
 
     written = []
@@ -172,7 +170,7 @@ def _write_outputs(result, output_dir: Path, cache_dir: Path | None) -> list[Pat
         f"{result.path} of {result.repository.resolve().name} "
         f"({mode}) up to {result.newest.date[:10]}"
     )
-    figures = _figures(result, title, texts["history.csv"], cache_dir)
+    figures = _figures(result, title, texts["history.csv"], cache)
     for name, data in figures.items():
         path = output_dir / name
         try:
@@ -183,71 +181,52 @@ def _write_outputs(result, output_dir: Path, cache_dir: Path | None) -> list[Pat
     return written
 
 
-def _figures(result, title: str, history_csv: str, cache_dir: Path | None) -> dict[str, bytes]:
+def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[str, bytes]:
     """trend.png and trend.svg: drawn, or as drawn last time for the same
     history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
-    import and to draw, and the history of an unchanged repository is the same).
-
-    The last figures drawn are kept in the store file ``history-trend.cache``
-    of the cache directory (see :mod:`lensaudit.store`).
-    """
-    import hashlib
+    import and to draw, and the history of an unchanged repository is the
+    same), kept in the history's index (:mod:`lensaudit.history.index`)."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from ..cache import record_file
-    from ..history.cache import fingerprint, store_format
+    from ..history.index import caches, key_of
 
+    index = caches(cache)[1]
     try:
         matplotlib_version = version("matplotlib")
     except PackageNotFoundError:
         matplotlib_version = ""
-    key = hashlib.sha256(
-        "\0".join((fingerprint(), matplotlib_version, title, history_csv)).encode()
-    ).hexdigest()
+    key = key_of(matplotlib_version, title, history_csv)
     names = ("trend.png", "trend.svg")
-    stored = None
-    if cache_dir is not None:
-        stored = record_file("history", "trend", store_format(), cache_dir)
-        found = stored.read()
-        if (
-            isinstance(found, tuple)
-            and len(found) == 1 + len(names)
-            and found[0] == key
-            and all(isinstance(data, bytes) for data in found[1:])
-        ):
-            return dict(zip(names, found[1:], strict=True))
+    found = index.get("trend", key) if index is not None else None
+    if (
+        isinstance(found, tuple)
+        and len(found) == len(names)
+        and all(isinstance(data, bytes) for data in found)
+    ):
+        return dict(zip(names, found, strict=True))
     figures = _draw(result, title)
-    if stored is not None:
-        try:
-            stored.write((key, *(figures[name] for name in names)))
-        except (OSError, ValueError):
-            pass  # the figures are written to the output directory all the same
+    if index is not None:
+        index.put("trend", key, tuple(figures[name] for name in names))
     return figures
 
 
 def _draw(result, title: str) -> dict[str, bytes]:
+    """trend.png and trend.svg, drawn one after the other (the second costs a
+    tenth of a second)."""
     import io
-    from functools import partial
 
     from ..history import trend_figure
-    from ..workers import in_parallel
 
     figure = trend_figure(result.records(), title=title)
-    names = ("trend.png", "trend.svg")
-
-    def render(name: str) -> bytes:
+    figures = {}
+    for name, options in (
+        ("trend.png", {"format": "png", "dpi": 150}),
+        ("trend.svg", {"format": "svg", "dpi": 150, "metadata": {"Date": None}}),
+    ):
         stream = io.BytesIO()
-        svg = name.endswith("svg")
-        figure.savefig(
-            stream,
-            format="svg" if svg else "png",
-            dpi=150,
-            metadata={"Date": None} if svg else None,
-        )
-        return stream.getvalue()
-
-    # Each drawn in a process of its own where a second CPU is free.
-    return dict(zip(names, in_parallel([partial(render, name) for name in names]), strict=True))
+        figure.savefig(stream, **options)
+        figures[name] = stream.getvalue()
+    return figures
 
 
 def _print_summary(result, written: list[Path]) -> None:
@@ -258,8 +237,8 @@ def _print_summary(result, written: list[Path]) -> None:
         f"{len(result.revisions):,} change the database"
     )
     click.echo(
-        f"{result.blobs:,} file versions: {result.blobs_parsed:,} parsed, "
-        f"{result.blobs_cached:,} from the cache; {result.seconds:.1f} s"
+        f"{result.blobs:,} file versions: {result.blobs_read:,} read, "
+        f"{result.blobs_reused:,} from the last run; {result.seconds:.1f} s"
     )
     if last is not None:
         counts = last.counts

@@ -9,9 +9,11 @@ coefficients of every entry with a finite r_max.
 
 Revisions are read through git's plumbing (``git log``, ``git cat-file``):
 nothing is checked out and the work tree, the index and the refs are left
-as they are. Each distinct file version (blob) is parsed and audited once,
-and the result can be kept in an on-disk cache between runs, so a history of
-thousands of commits costs about as much as its distinct file versions.
+as they are. Each distinct file version (blob) is read once, through
+:mod:`lensaudit.read` as any database file is, with the one cache
+(:class:`lensaudit.read.Cache`), which keeps its tables and metrics by
+content between runs and between commands; the history's index keeps the
+last run whole (:mod:`.index`).
 
 Entries are followed across revisions by identity, not by line: maker, lens
 name, crop factor, model and focal length, plus the coefficients. An entry's
@@ -25,12 +27,11 @@ what it really changes.
 
 The audit is a pipeline of stages, one module each: :mod:`.commits` (the
 commits selected, through git), :mod:`.blobs` (the file versions of each
-commit, and their contents), :mod:`.parse` (each file version as plain data,
-piece by piece, in worker processes), :mod:`.audit` (each distinct model
-audited once, counted per file version and revision), :mod:`.introduced`
-(who introduced each entry) and :mod:`.outputs` (CSV and the trend figure);
-:mod:`.results` holds what they give and :mod:`.cache` what is kept between
-runs.
+commit), :mod:`.versions` (each file version read through
+:mod:`lensaudit.read` and summarized, on every core), :mod:`.audit` (the
+summaries counted per revision), :mod:`.introduced` (who introduced each
+entry) and :mod:`.outputs` (CSV and the trend figure); :mod:`.results`
+holds what they give and :mod:`.index` what is kept of a run.
 """
 
 from __future__ import annotations
@@ -42,12 +43,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import loader
-from . import audit, blobs, commits, introduced, parse
-from .cache import HistoryCache, default_cache_dir
+from .. import read
+from . import blobs, commits, introduced, versions
+from .audit import Interner
 from .commits import Commit, HistoryError
+from .index import caches, history_data, history_from_data
 from .outputs import PAPER_SNAPSHOT, trend_figure
-from .parse import entry_identity
 from .results import (
     COUNT_COLUMNS,
     HISTORY_COLUMNS,
@@ -57,10 +58,8 @@ from .results import (
     IntroducedEntry,
     Revision,
 )
+from .versions import entry_identity
 
-# numpy (and the modules that need it) is imported where used: file versions
-# are parsed in forked worker processes, which must be started before numpy
-# starts its threads.
 if TYPE_CHECKING:
     from ..pipeline import Audit
 
@@ -78,7 +77,6 @@ __all__ = [
     "Revision",
     "audit_history",
     "audit_revision",
-    "default_cache_dir",
     "entry_identity",
     "trend_figure",
 ]
@@ -95,7 +93,7 @@ def audit_history(
     since: str | None = None,
     until: str | None = None,
     first_parent: bool = False,
-    cache_dir: str | os.PathLike[str] | None = None,
+    cache: bool | str | os.PathLike[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> History:
     """Audit every revision of the database at ``path`` in a git repository.
@@ -104,35 +102,38 @@ def audit_history(
     the repository root. Commits are those of ``git log REVISION`` between
     ``since`` and ``until`` (ISO 8601 dates, committer time; a bare date
     means the whole day), or only the first-parent line with
-    ``first_parent``. ``cache_dir`` keeps file-version audits between runs.
-    ``progress(done, total)`` is called as file versions are parsed.
+    ``first_parent``. ``cache`` is the one cache's directory, or True for
+    lensaudit's (see :func:`lensaudit.read.cache.cache_dir`): file versions
+    read are kept there, and the run in the history's index. ``progress(done,
+    total)`` is called as file versions are read.
 
     Raises :class:`HistoryError` when git cannot run, the directory is not a
     repository, the revision or a date is invalid, no commit is selected, or
     the database path holds no XML file at any selected commit.
     """
     started = time.perf_counter()
-    started = time.perf_counter()
     db_path = commits.normalized_path(path)
     git = commits.Git(repository)
     tip = git.resolve_commit(revision)
     filters = commits.selection(since, until)
-    warnings: list[str] = []
-    auditor = audit.Auditor()
-    cache = HistoryCache(Path(cache_dir), auditor.idents, warnings) if cache_dir else None
+    store, index = caches(cache)
+    warnings = index.warnings if index is not None else []
     # A commit names its whole history: the same selection of it gives the same audit.
     run_key = repr((tip, db_path, filters, first_parent, time.tzname, time.timezone))
-    stored = cache.get_run(run_key) if cache else None
+    stored = index.get("run", run_key) if index is not None else None
     if stored is not None:
-        return replace(
-            stored,
-            repository=Path(repository),
-            revision=revision,
-            blobs_parsed=0,
-            blobs_cached=stored.blobs,
-            seconds=time.perf_counter() - started,
-            warnings=warnings,
-        )
+        try:
+            found = history_from_data(stored)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            found = None  # not what this code keeps: audited again
+        if found is not None:
+            return replace(
+                found,
+                repository=Path(repository),
+                revision=revision,
+                seconds=time.perf_counter() - started,
+                warnings=warnings,
+            )
 
     # 1. The commits, and the file versions of the database at each.
     selected, mainline = commits.log(git, tip, filters, first_parent, revision)
@@ -150,30 +151,26 @@ def audit_history(
             f"commits of {revision} selected"
         )
 
-    # 2. Each file version parsed and audited once. The newest revision's files
-    # are parsed even when cached: their entries are reported in full.
+    # 2. Each file version read once: the newest revision's in full (its entries
+    # are reported), the others summarized on every core.
     newest = selected[position[mainline[0]]]
     newest_files = files[newest.hash]
     every_blob = sorted({blob for m in files.values() for blob in m.values()})
     names = {blob: name for m in files.values() for name, blob in m.items()}
     names.update((blob, name) for name, blob in newest_files.items())
-    audits = cache.get(every_blob) if cache else {}
-    cached = len(audits)
-    keep = set(newest_files.values())
-    to_parse = [b for b in every_blob if b not in audits or b in keep]
-    sizes = git.object_sizes(to_parse)
-    missing = next((blob for blob, size in zip(to_parse, sizes, strict=True) if size is None), None)
-    if missing is not None:
-        raise HistoryError(f"git cannot read object {missing} of {git.repository}")
-    reader = git.blob_reader()
-    try:
-        parsed = parse.parse_blobs(to_parse, sizes, names, keep, auditor, reader, progress)
-    finally:
-        reader.close()
-    fresh = auditor.finish(parsed)
-    if cache:
-        cache.put({blob: a for blob, a in fresh.items() if blob not in audits}, every_blob)
-    audits.update(fresh)
+    full = _read_in_full(git, sorted(set(newest_files.values())), names, store)
+    summaries = {blob: versions.summarize(*found) for blob, found in full.items()}
+    if progress is not None:
+        progress(len(full), len(every_blob))
+    summaries |= versions.read_versions(
+        git,
+        [blob for blob in every_blob if blob not in full],
+        names,
+        store,
+        None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
+    )
+    interner = Interner()
+    audits = {blob: interner.audit(summaries[blob]) for blob in every_blob}
 
     # 3. The revisions, walking parents before children, and who introduced what.
     states, revisions = introduced.walk(
@@ -187,18 +184,46 @@ def audit_history(
         revisions=revisions,
         newest=newest,
         introduced=introduced.introduced_entries(
-            newest_files, states[newest.hash], parsed, auditor, selected
+            {name: full[blob] for name, blob in newest_files.items()},
+            states[newest.hash],
+            selected,
         ),
         commits=len(selected),
         blobs=len(every_blob),
-        blobs_parsed=len(parsed),
-        blobs_cached=cached,
+        blobs_read=len(every_blob),
+        blobs_reused=0,
         seconds=time.perf_counter() - started,
         warnings=warnings,
     )
-    if cache:
-        cache.put_run(run_key, result)
+    if index is not None:
+        index.put("run", run_key, history_data(result))
     return result
+
+
+def _read_in_full(
+    git: commits.Git, blobs: list[str], names: dict[str, str], cache: read.Cache | None
+) -> dict[str, tuple[read.FileTables, dict[str, list]]]:
+    """{blob: (tables, metric columns)} of file versions, read through the one cache."""
+    from ..pipeline import file_metrics
+
+    contents = [(data, names[blob], None) for blob, data in _contents(git, blobs)]
+    found = {
+        blob: (tables, file_metrics(tables, cache))
+        for blob, tables in zip(blobs, read.read_contents(contents, cache), strict=True)
+    }
+    if cache is not None:
+        cache.save()
+    return found
+
+
+def _contents(git: commits.Git, blobs: list[str]) -> list[tuple[str, bytes]]:
+    """(blob, content) of each of ``blobs``; HistoryError if git cannot give one."""
+    found = []
+    for blob, answer in zip(blobs, git.objects(blobs), strict=True):
+        if answer is None:
+            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
+        found.append((blob, answer[2]))
+    return found
 
 
 def audit_revision(
@@ -210,9 +235,7 @@ def audit_revision(
     ``path`` in ``revision``; files are named relative to ``path``. Raises
     :class:`HistoryError` when the revision or the path does not exist.
     """
-    from ..database import DatabaseSource
-    from ..loader import DistortionEntry, SourceFile
-    from ..pipeline import audit_entries
+    from ..pipeline import Audit, file_metrics
 
     db_path = commits.normalized_path(path)
     git = commits.Git(repository)
@@ -223,17 +246,14 @@ def audit_revision(
         problem = "holds no *.xml file" if present else "does not exist"
         raise HistoryError(f"{db_path or '.'!r} {problem} at {revision}")
     names = sorted(files)
-    entries: list[DistortionEntry] = []
-    sources = []
-    for name, answer in zip(names, git.objects([files[n] for n in names]), strict=True):
-        if answer is None:
-            raise HistoryError(f"git cannot read {name} of {revision}")
-        file_entries, error = loader.read_bytes(answer[2], name)
-        entries.extend(file_entries)
-        sources.append(
-            SourceFile(name, Path(repository) / db_path / name, len(file_entries), error)
-        )
-    source = DatabaseSource(
+    contents = _contents(git, [files[name] for name in names])
+    found = read.read_contents(
+        [
+            (data, name, Path(repository) / db_path / name)
+            for name, (_, data) in zip(names, contents, strict=True)
+        ]
+    )
+    source = read.DatabaseSource(
         (Path(repository),), f"{db_path} at {revision} ({commit[:7]}) of {repository}"
     )
-    return audit_entries(entries, source, sources)
+    return Audit.of_files(source, found, [file_metrics(tables, None) for tables in found])

@@ -7,10 +7,13 @@ holds one, the same file first; a commit introduces what no parent holds.
 
 from __future__ import annotations
 
-from .audit import Auditor, BlobAudit, Parsed, revision
+from .. import read
+from ..read.records import ROW_FIELDS, STATUS_OK, DistortionEntry
+from .audit import BlobAudit, revision
 from .commits import Commit
 from .results import IntroducedEntry, Revision
 
+_STATUS = ROW_FIELDS.index("status")
 # Index into a history's commits meaning "already there before the first commit examined".
 _BEFORE = -1
 
@@ -128,37 +131,30 @@ def walk(
 
 
 def introduced_entries(
-    files: dict[str, str],
+    newest: dict[str, tuple[read.FileTables, dict[str, list]]],
     state: _State,
-    parsed: dict[str, Parsed],
-    auditor: Auditor,
     commits: list[Commit],
 ) -> list[IntroducedEntry]:
-    """Entries of the newest revision with a finite r_max, with their introducers."""
-    import numpy as np
-
-    m = auditor.metrics
-    assert m is not None
+    """Entries of the newest revision with a finite r_max, with their introducers;
+    ``newest`` maps each of its file names to the file's tables and metric columns."""
     introduced = []
-    for name in sorted(files):
-        blob = parsed[files[name]]
-        if blob.error or blob.kept is None:
+    for name in sorted(newest):
+        tables, metrics = newest[name]
+        if tables.error:
             continue  # an unreadable file has no audited entry
-        for entry, key, introducer in zip(
-            blob.kept, blob.audit_keys, state[name].introducers, strict=True
-        ):
-            if not np.isfinite(m.r_max[key]):
+        audited = [(row, i) for i, row in enumerate(tables.distortion) if row[_STATUS] == STATUS_OK]
+        for (row, index), introducer in zip(audited, state[name].introducers, strict=True):
+            r_max = metrics["r_max"][index]
+            if r_max - r_max != 0:  # not finite
                 continue
-            if entry.file != name:  # the same content under two names
-                entry = entry._replace(file=name)
             introduced.append(
                 IntroducedEntry(
-                    entry,
-                    float(m.r_max[key]),
-                    float(m.d_max[key]),
-                    float(m.r_normalized[key]),
-                    float(m.r_normalized_paper[key]),
-                    bool(m.folds_in_image[key]),
+                    DistortionEntry(name, *row),
+                    r_max,
+                    metrics["d_max"][index],
+                    metrics["r_normalized"][index],
+                    metrics["r_normalized_paper"][index],
+                    bool(metrics["folds_in_image"][index]),
                     None if introducer == _BEFORE else commits[introducer],
                 )
             )

@@ -25,7 +25,7 @@ def write_csv(
     round-trip (``inf``, ``nan``), booleans as ``true``/``false``."""
     import csv
 
-    from ..pipeline import format_float
+    from ..columns import format_float
 
     out = csv.writer(stream, lineterminator="\n")
     out.writerow(columns)

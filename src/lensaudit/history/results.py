@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from ..columns import COLUMNS, FLOAT_COLUMNS
-from ..loader import MODEL_COEFFICIENTS, DistortionEntry
+from ..read.records import MODEL_COEFFICIENTS, DistortionEntry
 from .commits import Commit
 from .outputs import write_csv
 
@@ -148,7 +148,11 @@ class History:
 
     ``revisions`` are the commits that change the database, oldest first;
     ``newest`` is the newest commit on the first-parent line, whose entries
-    ``introduced`` describes. The remaining fields say what the run cost.
+    ``introduced`` describes. The remaining fields say what the run cost:
+    ``commits`` examined, distinct file versions (``blobs``), those read
+    through :mod:`lensaudit.read` (``blobs_read``: parsed, or taken from the
+    one cache), those whose audit was the last run's, taken whole from the
+    history's index (``blobs_reused``), and ``seconds``.
     """
 
     repository: Path
@@ -160,8 +164,8 @@ class History:
     introduced: list[IntroducedEntry]
     commits: int
     blobs: int
-    blobs_parsed: int
-    blobs_cached: int
+    blobs_read: int
+    blobs_reused: int
     seconds: float
     warnings: list[str] = field(default_factory=list)
 

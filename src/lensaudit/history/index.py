@@ -1,0 +1,205 @@
+"""The history's index: what the last run gave, in one small file beside the
+one cache.
+
+File versions are kept by the one cache (:class:`lensaudit.read.Cache`: a
+record per content, with the reader's tables and the pipeline's metrics).
+The index keeps only what a whole run made of them, each entry under a
+name and a key: the last :class:`History` (``run``, keyed by the commit,
+path and selection) and the trend figures drawn from it (``trend``, keyed by
+what they show), so that the same run again costs one file read. It is the
+file ``history`` of the cache directory (``--cache DIR``: of DIR).
+
+The file starts with a fixed header and the fingerprint of the code that
+wrote it (:func:`fingerprint`), then the BLAKE2b digest of its body, a
+:mod:`marshal` table ``{name: (key, value)}``; a damaged, truncated or
+foreign file reads as empty. It is written whole to a temporary file and
+renamed. A file that cannot be written gives a warning, never an error.
+"""
+
+from __future__ import annotations
+
+import functools
+import marshal
+import os
+from dataclasses import fields
+from pathlib import Path
+
+from .. import read
+from ..read.records import DistortionEntry
+from .commits import Commit
+from .results import COUNT_COLUMNS, History, IntroducedEntry, Revision
+
+try:  # BLAKE2 alone, as the one cache: hashlib would also load OpenSSL
+    from _blake2 import blake2b
+except ImportError:  # pragma: no cover - every CPython has _blake2
+    from hashlib import blake2b
+
+#: The index's file name, in the cache directory.
+NAME = "history"
+_MAGIC = b"lensaudit history index 1\n"
+_DIGEST_SIZE = 16
+#: The code that decides what a run gives, besides the reader's (which the
+#: one cache's fingerprint covers).
+_CODE = ("history/*.py", "solver/*.py", "pipeline.py", "columns.py")
+#: Files of earlier layouts of the history's cache, removed when the index is written.
+_LEGACY = ("history-*.cache", "history-*.sqlite3", "history-trend-*.png", "history-trend-*.svg")
+_ERRORS = (OSError, ValueError, EOFError, TypeError, KeyError, IndexError)
+
+
+def fingerprint() -> bytes:
+    """What an index is valid for: the one cache's fingerprint (lensaudit's
+    version and the reader's code) and the history's own code."""
+    return read.cache.fingerprint() + _code_digest()
+
+
+@functools.cache
+def _code_digest() -> bytes:
+    package = Path(__file__).resolve().parent.parent
+    digest = blake2b(digest_size=_DIGEST_SIZE)
+    for pattern in _CODE:
+        for path in sorted(package.glob(pattern)):
+            digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.digest()
+
+
+def key_of(*texts: str) -> str:
+    """A short key for what ``texts`` say together."""
+    digest = blake2b(digest_size=_DIGEST_SIZE)
+    for text in texts:
+        data = text.encode("utf-8", "surrogatepass")
+        digest.update(len(data).to_bytes(8, "little") + data)
+    return digest.hexdigest()
+
+
+def caches(cache: bool | str | os.PathLike[str] | None) -> tuple[read.Cache | None, Index | None]:
+    """The one cache and the history's index that ``cache`` names: True for
+    lensaudit's cache directory, a path for that directory, None or False
+    for none."""
+    if cache is None or cache is False:
+        return None, None
+    if cache is True:
+        return read.Cache(), Index(read.cache.cache_dir() / NAME)
+    return read.Cache(cache), Index(Path(cache) / NAME)
+
+
+class Index:
+    """The index file at ``path``: :meth:`get` an entry, :meth:`put` one (written
+    at once). Problems writing add a message to :attr:`warnings`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.warnings: list[str] = []
+
+    def _entries(self) -> dict:
+        try:
+            data = self.path.read_bytes()
+            head = len(_MAGIC) + 2 * _DIGEST_SIZE
+            body = memoryview(data)[head + _DIGEST_SIZE :]
+            if (
+                data[: len(_MAGIC)] != _MAGIC
+                or data[len(_MAGIC) : head] != fingerprint()
+                or data[head : head + _DIGEST_SIZE]
+                != blake2b(body, digest_size=_DIGEST_SIZE).digest()
+            ):
+                return {}
+            entries = marshal.loads(body)
+        except _ERRORS:
+            return {}
+        return entries if isinstance(entries, dict) else {}
+
+    def get(self, name: str, key: str) -> object | None:
+        """The value kept under ``name`` if it was kept for ``key``; else None."""
+        found = self._entries().get(name)
+        if isinstance(found, tuple) and len(found) == 2 and found[0] == key:
+            return found[1]
+        return None
+
+    def put(self, name: str, key: str, value: object) -> None:
+        """Keep ``value`` (plain data) under ``name`` for ``key``, replacing what was there."""
+        entries = self._entries()
+        entries[name] = (key, value)
+        temporary = self.path.with_name(f"{self.path.name}.{os.getpid()}.tmp")
+        try:
+            body = marshal.dumps(entries)
+            seal = blake2b(body, digest_size=_DIGEST_SIZE).digest()
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with open(temporary, "wb") as stream:
+                stream.write(_MAGIC + fingerprint() + seal + body)
+            os.replace(temporary, self.path)
+            for pattern in _LEGACY:
+                for stale in self.path.parent.glob(pattern):
+                    stale.unlink(missing_ok=True)
+        except (OSError, ValueError) as error:
+            try:
+                temporary.unlink(missing_ok=True)
+            except OSError:
+                pass
+            self.warnings.append(f"cache {self.path} not used: {error}")
+
+
+def _commit_data(commit: Commit | None) -> tuple | None:
+    return None if commit is None else tuple(getattr(commit, f.name) for f in fields(Commit))
+
+
+def history_data(history: History) -> tuple:
+    """A history as marshal data (what the index keeps of a run)."""
+    return (
+        history.path,
+        history.first_parent,
+        [
+            (_commit_data(r.commit), r.mainline, r.files, tuple(r.counts.values()), r.errors)
+            for r in history.revisions
+        ],
+        _commit_data(history.newest),
+        [
+            (
+                tuple(i.entry),
+                i.r_max,
+                i.d_max,
+                i.r_normalized,
+                i.r_normalized_paper,
+                i.folds_in_image,
+                _commit_data(i.commit),
+            )
+            for i in history.introduced
+        ],
+        history.commits,
+        history.blobs,
+    )
+
+
+def history_from_data(data: tuple) -> History:
+    """The history :func:`history_data` kept (repository and timings to be filled in).
+    Raises TypeError or ValueError for data of another shape."""
+    path, first_parent, revisions, newest, introduced, commits, blobs = data
+    commit_of: dict[tuple, Commit] = {}
+
+    def commit(values: tuple | None) -> Commit | None:
+        if values is None:
+            return None
+        if values not in commit_of:
+            commit_of[values] = Commit(*values)
+        return commit_of[values]
+
+    return History(
+        repository=Path(),
+        path=path,
+        revision="",
+        first_parent=first_parent,
+        revisions=[
+            Revision(
+                commit(c), mainline, files, dict(zip(COUNT_COLUMNS, counts, strict=True)), errors
+            )
+            for c, mainline, files, counts, errors in revisions
+        ],
+        newest=commit(newest),
+        introduced=[
+            IntroducedEntry(DistortionEntry(*entry), *values, commit(c))
+            for entry, *values, c in introduced
+        ],
+        commits=commits,
+        blobs=blobs,
+        blobs_read=0,
+        blobs_reused=blobs,
+        seconds=0.0,
+    )

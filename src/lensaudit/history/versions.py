@@ -1,0 +1,180 @@
+"""Stage 3, versions: each distinct file version (git blob) read through
+:mod:`lensaudit.read` and summarized.
+
+A version is read as any database file is, by :func:`lensaudit.read.read_bytes`
+(its tables kept in the one cache, :class:`lensaudit.read.Cache`, by
+content), and its metrics are the pipeline's
+(:func:`lensaudit.pipeline.file_metrics`, kept in the same record). What the
+history needs of it is its :class:`Summary`: its error, its
+:data:`~.results.COUNT_COLUMNS` and the identity of each audited entry.
+
+Versions are read on every core by the reader's own mechanism
+(:func:`lensaudit.read.parallel.map_sized`), in rounds so that progress can
+be shown: each process reads its share of a round from git itself, keeps
+what it read in the cache, and sends back only summaries.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import NamedTuple
+
+from .. import read
+from ..read import parallel
+from ..read.records import MODEL_COEFFICIENTS, ROW_FIELDS, STATUS_OK, DistortionEntry
+from .commits import BlobReader, Git, HistoryError
+from .results import MODELS
+
+#: A round of versions read between two reports of progress holds about this many bytes.
+ROUND_BYTES = 32 << 20
+
+_FIELD = {name: index for index, name in enumerate(ROW_FIELDS)}
+_MAKER, _LENS, _TYPE, _CROP, _MODEL, _FOCAL, _STATUS = (
+    _FIELD[name] for name in ("maker", "lens", "type", "crop_factor", "model", "focal", "status")
+)
+#: model -> (first, last + 1) of its coefficients in a row.
+_COEFFICIENTS = {
+    model: (_FIELD[names[0]], _FIELD[names[-1]] + 1) for model, names in MODEL_COEFFICIENTS.items()
+}
+assert all(
+    ROW_FIELDS[start:end] == MODEL_COEFFICIENTS[model]
+    for model, (start, end) in _COEFFICIENTS.items()
+)
+
+
+def row_identity(row: Sequence) -> tuple:
+    """How an audited distortion row (see :data:`~lensaudit.read.records.ROW_FIELDS`)
+    is recognised in another revision: maker, lens, crop factor, model, focal
+    (mm) and the model's coefficients."""
+    model = row[_MODEL]
+    start, end = _COEFFICIENTS[model]
+    return (row[_MAKER], row[_LENS], row[_CROP], model, row[_FOCAL], tuple(row[start:end]))
+
+
+def entry_identity(entry: DistortionEntry) -> tuple:
+    """:func:`row_identity` of an audited entry."""
+    return row_identity(entry[1:])
+
+
+class Summary(NamedTuple):
+    """What one file version holds: its error ("" if none), its
+    :data:`~.results.COUNT_COLUMNS`, and the identity of each audited entry,
+    in file order."""
+
+    error: str
+    counts: tuple[int, ...]
+    identities: list[tuple]
+
+
+def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
+    """The summary of a file version from its tables and metric columns
+    (:func:`lensaudit.pipeline.file_metrics`)."""
+    entries = len(tables.distortion)
+    audited = 0
+    per_model = dict.fromkeys(MODELS, 0)
+    finite_per_model = dict.fromkeys(MODELS, 0)
+    folds = folds_rectilinear = folds_paper_rectilinear = 0
+    identities = []
+    for row, r_max, r_normalized_paper, folds_in_image in zip(
+        tables.distortion,
+        metrics["r_max"],
+        metrics["r_normalized_paper"],
+        metrics["folds_in_image"],
+        strict=True,
+    ):
+        if row[_STATUS] != STATUS_OK:
+            continue
+        model = row[_MODEL]
+        identities.append(row_identity(row))
+        audited += 1
+        per_model[model] += 1
+        if r_max - r_max != 0:  # infinite (or NaN): nothing folds
+            continue
+        finite_per_model[model] += 1
+        rectilinear = row[_TYPE] == "rectilinear"
+        if folds_in_image:
+            folds += 1
+            folds_rectilinear += rectilinear
+        if rectilinear and r_normalized_paper < 1:
+            folds_paper_rectilinear += 1
+    counts = (
+        entries,
+        audited,
+        *per_model.values(),
+        sum(finite_per_model.values()),
+        *finite_per_model.values(),
+        folds,
+        folds_rectilinear,
+        folds_paper_rectilinear,
+    )
+    return Summary(tables.error, counts, identities)
+
+
+def read_versions(
+    git: Git,
+    blobs: Sequence[str],
+    names: dict[str, str],
+    cache: read.Cache | None,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Summary]:
+    """The summaries of file versions (``blobs``, shown as ``names``), read on
+    every core; what is read is kept in ``cache``. ``progress(done)`` is
+    called after each round with the number read so far. Raises
+    :class:`~.commits.HistoryError` when git cannot give a version."""
+    sizes = []
+    for blob, size in zip(blobs, git.object_sizes(blobs), strict=True):
+        if size is None:
+            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
+        sizes.append(size)
+    read_batch = partial(_read_batch, git, names, None if cache is None else cache.directory)
+    found: dict[str, Summary] = {}
+    for round_blobs, round_sizes in _rounds(blobs, sizes):
+        shares = parallel.shares(round_sizes, parallel.cpus())
+        batches = [[round_blobs[index] for index in share] for share in shares]
+        batch_sizes = [sum(round_sizes[index] for index in share) for share in shares]
+        for batch, summaries in zip(
+            batches, parallel.map_sized(read_batch, batches, batch_sizes), strict=True
+        ):
+            found.update(zip(batch, map(Summary._make, summaries), strict=True))
+        if progress is not None:
+            progress(len(found))
+    return found
+
+
+def _rounds(blobs: Sequence[str], sizes: Sequence[int]) -> list[tuple[list[str], list[int]]]:
+    """The versions and their sizes in rounds of about :data:`ROUND_BYTES` each."""
+    rounds: list[tuple[list[str], list[int]]] = []
+    total = ROUND_BYTES
+    for blob, size in zip(blobs, sizes, strict=True):
+        if total >= ROUND_BYTES:
+            rounds.append(([], []))
+            total = 0
+        rounds[-1][0].append(blob)
+        rounds[-1][1].append(size)
+        total += size
+    return rounds
+
+
+def _read_batch(git: Git, names: dict[str, str], cache_dir: Path | None, batch: list[str]) -> list:
+    """The summaries of one process's share of a round, as plain data. The
+    share has a cache of its own on the same directory, saved here: its
+    records are made in this process, and are not kept in memory after."""
+    from ..pipeline import file_metrics
+
+    cache = None if cache_dir is None else read.Cache(cache_dir)
+    reader = BlobReader(git)
+    known: dict[tuple, tuple] = {}  # each identity once: marshalled once, then referred to
+    summaries = []
+    try:
+        for blob in batch:
+            tables = read.read_bytes(reader.read(blob), names[blob], cache=cache)
+            error, counts, identities = summarize(tables, file_metrics(tables, cache))
+            identities = [known.setdefault(identity, identity) for identity in identities]
+            summaries.append((error, counts, identities))
+    finally:
+        reader.close()
+    if cache is not None:
+        cache.save()
+    return summaries
