@@ -133,9 +133,10 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
     visiting = visitor()
     try:
         # Read as one tree: names in namespaces, a root that is an element read,
-        # and a document type, which is dropped before anything is read (libxml2
-        # would give an <!ATTLIST> default as the value of an attribute not written).
-        if b"xmlns" in data or b"<!DOCTYPE" in data or _root_name(data) in read:
+        # and a document type with declarations of its own, which is dropped before
+        # anything is read (libxml2 would give an <!ATTLIST> default as the value
+        # of an attribute not written).
+        if b"xmlns" in data or _declares(data) or _root_name(data) in read:
             root = etree.fromstring(data, parser())
             root.getroottree().docinfo.clear()
             if b"xmlns" in data:
@@ -153,6 +154,19 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
         line = lines.first if lines is not None else root.sourceline or 1
         return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
     return Parsed(), visiting
+
+
+#: A document type that declares nothing itself: a name and an external identifier.
+_PLAIN_DOCTYPE = re.compile(
+    rb"<!DOCTYPE\s+[^\s\[>]+(?:\s+(?:SYSTEM|PUBLIC(?:\s+(?:\"[^\"]*\"|'[^']*')))"
+    rb"\s+(?:\"[^\"]*\"|'[^']*'))?\s*>"
+)
+
+
+def _declares(data: bytes) -> bool:
+    """Whether the document type may declare anything itself (an internal subset)."""
+    start = data.find(b"<!DOCTYPE")
+    return start >= 0 and _PLAIN_DOCTYPE.match(data, start) is None
 
 
 def _root_name(data: bytes) -> str:
