@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .. import read
 from . import blobs, commits, introduced, versions
@@ -120,22 +120,59 @@ def audit_history(
     warnings = index.warnings if index is not None else []
     # A commit names its whole history: the same selection of it gives the same audit.
     run_key = repr((tip, db_path, filters, first_parent, time.tzname, time.timezone))
-    stored = index.get("run", run_key) if index is not None else None
-    if stored is not None:
-        try:
-            found = history_from_data(stored)  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            found = None  # not what this code keeps: audited again
-        if found is not None:
-            return replace(
-                found,
-                repository=Path(repository),
-                revision=revision,
-                seconds=time.perf_counter() - started,
-                warnings=warnings,
-            )
-
+    found = _last_run(index, run_key)
+    if found is not None:
+        return replace(
+            found,
+            repository=Path(repository),
+            revision=revision,
+            seconds=time.perf_counter() - started,
+            warnings=warnings,
+        )
     # 1. The commits, and the file versions of the database at each.
+    selected, mainline, outside, files = _commits(
+        git, tip, filters, first_parent, revision, db_path
+    )
+    # 2. Each file version read once; 3. the revisions, and who introduced what.
+    newest = next(c for c in selected if c.hash == mainline[0])
+    full, audits = _read_versions(git, files, files[newest.hash], store, progress)
+    states, revisions = introduced.walk(
+        selected, outside, files, first_parent, set(mainline), audits
+    )
+    result = History(
+        repository=Path(repository),
+        path=db_path,
+        revision=revision,
+        first_parent=first_parent,
+        revisions=revisions,
+        newest=newest,
+        introduced=introduced.introduced_entries(
+            {name: full[blob] for name, blob in files[newest.hash].items()},
+            states[newest.hash],
+            selected,
+        ),
+        commits=len(selected),
+        blobs=len(audits),
+        blobs_read=len(audits),
+        blobs_reused=0,
+        seconds=time.perf_counter() - started,
+        warnings=warnings,
+    )
+    if index is not None:
+        index.put("run", run_key, history_data(result))
+    return result
+
+
+def _commits(
+    git: commits.Git,
+    tip: str,
+    filters: Any,
+    first_parent: bool,
+    revision: str,
+    db_path: str,
+) -> tuple[list, list, list[str], dict[str, dict[str, str]]]:
+    """The commits selected, the mainline, the parents outside the selection,
+    and the file versions (name -> blob) of the database at each of them."""
     selected, mainline = commits.log(git, tip, filters, first_parent, revision)
     position = {c.hash: i for i, c in enumerate(selected)}
     outside = sorted(
@@ -150,11 +187,30 @@ def audit_history(
             f"{db_path or '.'!r} {problem} at any of the {len(selected):,} "
             f"commits of {revision} selected"
         )
+    return selected, mainline, outside, files
 
-    # 2. Each file version read once: the newest revision's in full (its entries
-    # are reported), the others summarized on every core.
-    newest = selected[position[mainline[0]]]
-    newest_files = files[newest.hash]
+
+def _last_run(index: Any, run_key: str) -> History | None:
+    """The history the index keeps for this run, or None."""
+    stored = index.get("run", run_key) if index is not None else None
+    if stored is None:
+        return None
+    try:
+        return history_from_data(stored)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None  # not what this code keeps: audited again
+
+
+def _read_versions(
+    git: commits.Git,
+    files: dict[str, dict[str, str]],
+    newest_files: dict[str, str],
+    store: read.Cache | None,
+    progress: Callable[[int, int], None] | None,
+) -> tuple[dict[str, tuple[read.FileTables, dict[str, list]]], dict[str, Any]]:
+    """Each file version read once: the newest revision's in full (its entries
+    are reported), the others summarized on every core. (The newest files'
+    tables and metrics by blob, and the audit of every version by blob.)"""
     every_blob = sorted({blob for m in files.values() for blob in m.values()})
     names = {blob: name for m in files.values() for name, blob in m.items()}
     names.update((blob, name) for name, blob in newest_files.items())
@@ -170,34 +226,7 @@ def audit_history(
         None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
     )
     interner = Interner()
-    audits = {blob: interner.audit(summaries[blob]) for blob in every_blob}
-
-    # 3. The revisions, walking parents before children, and who introduced what.
-    states, revisions = introduced.walk(
-        selected, outside, files, first_parent, set(mainline), audits
-    )
-    result = History(
-        repository=Path(repository),
-        path=db_path,
-        revision=revision,
-        first_parent=first_parent,
-        revisions=revisions,
-        newest=newest,
-        introduced=introduced.introduced_entries(
-            {name: full[blob] for name, blob in newest_files.items()},
-            states[newest.hash],
-            selected,
-        ),
-        commits=len(selected),
-        blobs=len(every_blob),
-        blobs_read=len(every_blob),
-        blobs_reused=0,
-        seconds=time.perf_counter() - started,
-        warnings=warnings,
-    )
-    if index is not None:
-        index.put("run", run_key, history_data(result))
-    return result
+    return full, {blob: interner.audit(summaries[blob]) for blob in every_blob}
 
 
 def _read_in_full(
