@@ -11,10 +11,13 @@ from __future__ import annotations
 import json
 import os
 import re
+import tempfile
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from lensaudit.check import check
 from lensaudit.cli import main
@@ -224,3 +227,31 @@ def test_a_known_duplicate_moved_and_reformatted_is_known_to_the_baseline(tmp_pa
         ("duplicate-lens", "error", True)
     ]
     assert not result.failed and result.resolved == 0
+
+
+# Pieces of markup that break a file, or make it mean something else, where they land.
+_SNIPPETS = [b"<", b">", b"</lens>", b"<lens>", b"<!--", b"-->", b"&x;", b"<distortion/>",
+             b'"', b"\x00", b"\xff", b"<![CDATA[", b"]]>", b"<?pi ?>"]  # fmt: skip
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.data())
+def test_scan_and_check_count_the_same_entries_of_any_mutated_file(bundled_db, tmp_path, data):
+    original = (bundled_db / "slr-tokina.xml").read_bytes()
+    cut = data.draw(st.integers(0, len(original)), label="cut")
+    kind = data.draw(st.sampled_from(["truncate", "delete", "insert"]), label="kind")
+    if kind == "truncate":
+        mutated = original[:cut]
+    elif kind == "delete":
+        mutated = original[:cut] + original[cut + data.draw(st.integers(1, 400)) :]
+    else:
+        mutated = original[:cut] + data.draw(st.sampled_from(_SNIPPETS)) + original[cut:]
+    folder = Path(tempfile.mkdtemp(dir=tmp_path))
+    (folder / "a.xml").write_bytes(mutated)
+    (folder / "b.xml").write_bytes((bundled_db / "6x6.xml").read_bytes())  # one file that reads
+    scanned, _ = scan_json(folder)["database"]["files"]
+    checked, _ = check(folder).files
+    assert scanned["entries"] - bool(scanned["error"]) == checked.entries
+    assert scanned["error"] == checked.error

@@ -516,13 +516,11 @@ def test_the_same_run_again_is_taken_from_the_index_whole(repo, tmp_path, monkey
     assert (second.newest, second.commits, second.path) == (first.newest, first.commits, first.path)
 
 
-def test_the_index_is_one_file_beside_the_files_records(repo, tmp_path):
+def test_the_index_is_one_file_beside_the_records_of_the_one_cache(repo, tmp_path):
     audit_history(repo.path, cache=tmp_path)
-    names = [p.name for p in tmp_path.iterdir()]
-    assert "history" in names
-    assert {name for name in names if name != "history"} and all(
-        name.endswith(".rec") for name in names if name != "history"
-    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["files", "history"]
+    records = [p.name for p in (tmp_path / "files").iterdir()]
+    assert records and all(name.endswith(".rec") for name in records)
 
 
 def test_a_run_of_another_revision_is_not_taken_from_the_cache(repo, tmp_path):

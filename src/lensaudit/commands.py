@@ -150,7 +150,7 @@ def scan(arguments: ScanArguments) -> None:
     gc.disable()
     try:
         if arguments.kind != "distortion":
-            _scan_calibrations(paths, arguments.output_format, arguments.kind, output)
+            _scan_calibrations(paths, arguments, output)
             return
         from .formats import writer
         from .pipeline import run as audit
@@ -170,24 +170,21 @@ def scan(arguments: ScanArguments) -> None:
             gc.enable()
 
 
-def _scan_calibrations(
-    paths: list[Path], output_format: str, kind: str, output: Path | None
-) -> None:
+def _scan_calibrations(paths: list[Path], arguments: ScanArguments, output: Path | None) -> None:
     """``scan --kind vignetting|tca``: read the elements of that kind and audit them."""
     from importlib import import_module
 
-    from .calibrations import load
+    from .read import Cache, read
     from .read.records import LoadError
 
     try:
-        database = load(paths or None)
+        cache = Cache() if arguments.cache else None
+        database = read(paths or None, cache=cache, calibrations=True)
     except LoadError as error:
         fail(str(error))
     files = database.files
     if files and all(f.error for f in files):
         fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
-    audit = import_module(f"lensaudit.{kind}").of_database(database)
+    audit = import_module(f"lensaudit.{arguments.kind}").of_database(database)
     with output_stream(output) as stream:
-        audit.write(output_format, stream)
-
-
+        audit.write(arguments.output_format, stream)

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
         def entry_column(self, name: str) -> list: ...
         def metric_columns(self) -> dict[str, list]: ...
 
+
 MODELS = tuple(MODEL_COEFFICIENTS)
 TOTAL = "Total"
 

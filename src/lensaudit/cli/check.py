@@ -102,9 +102,9 @@ def check(
     ls-tree and git cat-file; the work tree is not touched. A baseline file
     that cannot be parsed is replaced by its last version in git that can.
 
-    With --cache (the default), a file whose bytes an earlier run of any
-    command read (the baseline's files too) is not parsed again; the output
-    is the same.
+    With --cache (the default), a file whose bytes an earlier check, report
+    or `scan --kind` read whole (the baseline's files too) is not parsed
+    again; the output is the same.
 
     \b
     Exit status:

@@ -15,31 +15,13 @@ if TYPE_CHECKING:
 PAPER_SNAPSHOT = "2021-05-30"
 
 
-def write_csv(
-    stream: TextIO,
-    columns: Sequence[str],
-    records: list[dict[str, Any]],
-    float_columns: frozenset[str],
-) -> None:
-    """Write ``records`` under a header of ``columns``: values of ``float_columns``
-    round-trip (``inf``, ``nan``), booleans as ``true``/``false``."""
-    import csv
+def write_csv(stream: TextIO, columns: Sequence[str], records: list[dict[str, Any]]) -> None:
+    """Write ``records`` under a header of ``columns``, through lensaudit's one
+    CSV writer (:func:`lensaudit.formats.csv_format.write_rows`): floats
+    round-trip (``inf``; NaN empty), booleans as ``true``/``false``."""
+    from ..formats.csv_format import write_rows
 
-    from ..columns import format_float
-
-    out = csv.writer(stream, lineterminator="\n")
-    out.writerow(columns)
-    for record in records:
-        out.writerow(
-            [
-                format_float(value)
-                if name in float_columns
-                else ("true" if value else "false")
-                if isinstance(value, bool)
-                else value
-                for name, value in record.items()
-            ]
-        )
+    write_rows(stream, columns, [[record[name] for record in records] for name in columns])
 
 
 def _utc(value: object) -> datetime:

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from ..columns import COLUMNS, FLOAT_COLUMNS
+from ..columns import COLUMNS
 from ..read.records import MODEL_COEFFICIENTS, DistortionEntry
 from .commits import Commit
 from .outputs import write_csv
@@ -58,8 +58,6 @@ INTRODUCED_COLUMNS = tuple(
     name for name in COLUMNS
     if name not in {"real_focal", "tail", "r_corner", "r_corner_paper", "status", "message"}
 ) + ("commit", "date", "author", "subject")  # fmt: skip
-
-_FLOAT_INTRODUCED = FLOAT_COLUMNS & frozenset(INTRODUCED_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -194,8 +192,8 @@ class History:
 
     def write_csv(self, stream: TextIO) -> None:
         """Write ``history.csv``: floats round-trip, booleans ``true``/``false``."""
-        write_csv(stream, HISTORY_COLUMNS, self.records(), frozenset({"share_finite"}))
+        write_csv(stream, HISTORY_COLUMNS, self.records())
 
     def write_introduced_csv(self, stream: TextIO) -> None:
         """Write ``introduced.csv``: floats round-trip, ``inf`` for infinite values."""
-        write_csv(stream, INTRODUCED_COLUMNS, self.introduced_records(), _FLOAT_INTRODUCED)
+        write_csv(stream, INTRODUCED_COLUMNS, self.introduced_records())

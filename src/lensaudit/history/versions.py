@@ -128,7 +128,7 @@ def read_versions(
         if size is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         sizes.append(size)
-    read_batch = partial(_read_batch, git, names, None if cache is None else cache.directory)
+    read_batch = partial(_read_batch, git, names, None if cache is None else cache.root)
     found: dict[str, Summary] = {}
     for round_blobs, round_sizes in _rounds(blobs, sizes):
         shares = parallel.shares(round_sizes, parallel.cpus())

@@ -98,8 +98,11 @@ class Cache:
     :meth:`save` writes every record that changed.
     """
 
-    def __init__(self, directory: str | os.PathLike[str] | None = None) -> None:
-        self.directory = Path(directory) if directory is not None else cache_dir() / "files"
+    def __init__(self, root: str | os.PathLike[str] | None = None) -> None:
+        #: The cache directory (:func:`cache_dir` unless given).
+        self.root = Path(root) if root is not None else cache_dir()
+        #: Where the records are.
+        self.directory = self.root / "files"
         self._records: dict[bytes, dict[str, tuple[bytes, bytes]]] = {}
         self._changed: set[bytes] = set()
 
