@@ -70,7 +70,7 @@ def run(quick: bool) -> list[dict]:
                     }
                 )
             shutil.rmtree(database)
-        rows.append({"work": "(Python with lensaudit.read and lxml imported)", "peak MB": baseline[2]})
+        rows.append({"work": "(Python, lensaudit.read and lxml imported)", "peak MB": baseline[2]})
         return rows
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
