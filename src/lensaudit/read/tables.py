@@ -327,32 +327,37 @@ def distortion_row(element: etree._Element, context: LensContext, line: int) -> 
         real_text = get("real-focal")
         texts = [focal_text, "1" if real_text is None else real_text]
         texts += (get(name, "0") for name in names)
-        joined = "".join(texts)
-        # float() alone also takes "1_0", "nan", "inf" and non-ASCII digits.
-        if joined.isascii() and "_" not in joined:
-            try:
-                values = list(map(float, texts))
-            except ValueError:
-                values = None
-            if values is not None:
-                total = sum(values)
-                if total - total == 0 and values[0] > 0 and values[1] > 0:  # all finite
-                    focal = values[0]
-                    real_focal = (
-                        context.real_focals.get(focal, NAN) if real_text is None else (values[1])
-                    )
-                    values.append(NAN)
-                    return (
-                        line,
-                        *context.fields,
-                        model,
-                        focal,
-                        real_focal,
-                        *_LAYOUT[model](values),  # type: ignore[index]
-                        STATUS_OK,
-                        "",
-                    )
+        values = plain_numbers(texts)
+        if values is not None and values[0] > 0 and values[1] > 0:
+            focal = values[0]
+            real_focal = context.real_focals.get(focal, NAN) if real_text is None else values[1]
+            values.append(NAN)
+            return (
+                line,
+                *context.fields,
+                model,
+                focal,
+                real_focal,
+                *_LAYOUT[model](values),  # type: ignore[index]
+                STATUS_OK,
+                "",
+            )
     return _checked_distortion_row(element, context, line)
+
+
+def plain_numbers(texts: list[str]) -> list[float] | None:
+    """The numbers of ``texts`` where every one is a plain finite decimal (the
+    common case), else None: float() alone also takes "1_0", "nan", "inf"
+    and digits that are not ASCII, which :func:`parse_number` refuses."""
+    joined = "".join(texts)
+    if not joined.isascii() or "_" in joined:
+        return None
+    try:
+        values = list(map(float, texts))
+    except ValueError:
+        return None
+    total = sum(values)
+    return values if total - total == 0 else None
 
 
 def _checked_distortion_row(element: etree._Element, context: LensContext, line: int) -> tuple:
@@ -436,25 +441,17 @@ class CalibrationSpec:
         if fast is not None and not context.problem:
             names, defaults, layout = fast
             texts = list(map(get, names, defaults))
-            if None not in texts:  # every required attribute is there
-                joined = "".join(texts)
-                if joined.isascii() and "_" not in joined:
-                    try:
-                        values = list(map(float, texts))
-                    except ValueError:
-                        values = None
-                    if values is not None:
-                        total = sum(values)
-                        if total - total == 0 and min(values[: len(self.required)]) > 0:
-                            values.append(NAN)
-                            return (
-                                line,
-                                *context.calibration_fields,
-                                model,
-                                *layout(values),
-                                STATUS_OK,
-                                "",
-                            )
+            values = None if None in texts else plain_numbers(texts)  # all required given
+            if values is not None and min(values[: len(self.required)]) > 0:
+                values.append(NAN)
+                return (
+                    line,
+                    *context.calibration_fields,
+                    model,
+                    *layout(values),
+                    STATUS_OK,
+                    "",
+                )
         required = [(attribute, None) for attribute in self.required]
         model, values, problems = checked_attributes(element, required, self.models, context)
         return (
