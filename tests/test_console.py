@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import lens_xml
-from lensaudit import commands, console
+from lensaudit import commands
 from lensaudit.cli import main
 from lensaudit.cli.scan import scan as scan_command
 from lensaudit.console import ScanArguments, scan_arguments

@@ -27,7 +27,9 @@ def captured(bundled_db: Path, tmp_path_factory) -> dict:
         pytest.skip(f"no Lensfun history bundle at {HISTORY_BUNDLE}")
     clone = tmp_path_factory.mktemp("golden") / "lensfun"
     subprocess.run(
-        ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)], check=True, capture_output=True
+        ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)],
+        check=True,
+        capture_output=True,
     )
     result = subprocess.run(
         [sys.executable, str(GOLDEN / "capture.py"), str(bundled_db), str(clone)],

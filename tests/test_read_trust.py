@@ -91,8 +91,10 @@ def test_entity_references_are_refused_where_liblensfun_refuses_them(maker, refu
 
     text = (
         lens_xml(DISTORTION)
-        .replace('<lensdatabase version="2">', '<!DOCTYPE lensdatabase [<!ENTITY x "Foo">]>\n'
-                 '<lensdatabase version="2">')  # fmt: skip
+        .replace(
+            '<lensdatabase version="2">',
+            '<!DOCTYPE lensdatabase [<!ENTITY x "Foo">]>\n<lensdatabase version="2">',
+        )  # fmt: skip
         .replace("<maker>Test</maker>", f"<maker>{maker}</maker>")
     ).encode()
     loaded, _ = load_verdict(text)
@@ -152,7 +154,9 @@ def test_lines_beyond_65535_are_counted(bundled_db, padding):
     assert lines == distortion_lines(long)
     assert min(lines) > 70_000
     lens_lines = [m.start() for m in re.finditer(rb"<lens>", long)]
-    assert [lens.line for lens in tables.lenses] == [long.count(b"\n", 0, p) + 1 for p in lens_lines]
+    assert [lens.line for lens in tables.lenses] == [
+        long.count(b"\n", 0, p) + 1 for p in lens_lines
+    ]
 
 
 def test_lines_beyond_65535_of_a_start_tag_over_two_lines_are_where_it_ends(bundled_db):

@@ -19,10 +19,9 @@ from hypothesis import strategies as st
 from conftest import lens_xml
 from lensaudit.cli import main
 from lensaudit.columns import METRIC_FLOAT_COLUMNS, format_floats
-from lensaudit.read import DatabaseSource
 from lensaudit.formats import json_format, writer
-from lensaudit.read import DistortionEntry, SourceFile
 from lensaudit.pipeline import COLUMNS, Audit, run
+from lensaudit.read import DatabaseSource, DistortionEntry, SourceFile
 
 EXPECTED_HEADER = (
     "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,real_focal,"

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from conftest import lens_xml
-from lensaudit.read import read
 from lensaudit.pipeline import audit_entries, run
+from lensaudit.read import read
 from lensaudit.summary import MODELS, TOTAL
 
 #: Only numpy's array code audits this one (a tangency, 1 - 3 w + 2.25 w^2).
