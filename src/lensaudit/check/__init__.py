@@ -79,7 +79,7 @@ from .inputs import (
     sources_from_paths,
 )
 from .matching import baseline_notices, compare, readable_baseline
-from .parsing import parse_sources
+from .parsing import ParsedSource, parse_sources
 from .result import (
     BAD_VALUE,
     BASELINE_UNREADABLE,
@@ -193,19 +193,20 @@ def check(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
     store = reader.Cache() if cache else None  # one for the database and its baseline
-    return _check(source, sources, baseline, margin, verbose, store)
+    read = parse_sources(sources, store)
+    del sources  # their bytes: the files are read, and memory is for what they hold
+    return _check(source, read, baseline, margin, verbose, store)
 
 
 def _check(
     source: reader.DatabaseSource,
-    sources: list[Source],
+    read: list[ParsedSource],
     baseline: str | os.PathLike[str] | None,
     margin: float,
     verbose: bool,
     cache: reader.Cache | None,
 ) -> CheckResult:
-    # inputs -> parsing -> findings (-> matching, with a baseline) -> CheckResult
-    read = parse_sources(sources, cache)
+    # inputs -> parsing (done) -> findings (-> matching, with a baseline) -> CheckResult
     files, current = analyse_parsed(read, margin, verbose)
     if baseline is None:
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])

@@ -41,7 +41,8 @@ class Source:
     ``name`` identifies the file across revisions (relative to the database
     path given), ``display`` is how it is shown, ``path`` is where it is on
     disk (None for a file read from git, which has an ``origin`` instead).
-    ``data`` is None when the file could not be read, and ``error`` says why.
+    ``data`` is None when the file could not be read, and ``error`` says why;
+    once parsed, a file on disk keeps no bytes (``data`` is then b"").
     """
 
     name: str

@@ -6,7 +6,7 @@ lenses, and the ``<vignetting>`` and ``<tca>`` records."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from .. import calibrations
@@ -145,11 +145,14 @@ def parse_sources(
     could not be read) is a file of status ``unreadable``."""
     readable = [(s.data, s.display, s.path) for s in sources if s.data is not None]
     tables = iter(reader.read_contents(readable, cache, calibrations=True))
+    del readable  # the bytes of files on disk are not kept once read (see below)
     parsed = []
     for source in sources:
         if source.data is None:
             found = reader.unreadable(source.display, source.path, source.error)
         else:
             found = next(tables)
+            if source.origin is None:  # only a git baseline's bytes are looked at again
+                source = replace(source, data=b"")
         parsed.append(ParsedSource(source, found, file_finding(found, source.display)))
     return parsed
