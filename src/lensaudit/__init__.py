@@ -42,7 +42,7 @@ def audit(
     :data:`lensaudit.pipeline.COLUMNS`; r_max and d_max are in Hugin units
     (1 = half the short side of the calibration image).
     """
-    from .pipeline import run
+    from .pipeline import run  # every `import lensaudit.X` runs this file: keep X light
 
     return run(path).to_dataframe()
 
@@ -50,11 +50,11 @@ def audit(
 def __getattr__(name: str) -> Any:
     # Lazy, so that `import lensaudit` and `lensaudit --help` stay fast.
     if name == "run":
-        from .pipeline import run
+        from .pipeline import run  # the reader, the column names stay free of it (tests)
 
         return run
     if name == "min_positive_root":
-        from .solver import min_positive_root
+        from .solver import min_positive_root  # numpy (solver.arrays); typing on a warm scan
 
         return min_positive_root
     raise AttributeError(f"module 'lensaudit' has no attribute {name!r}")

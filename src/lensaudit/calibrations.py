@@ -20,6 +20,9 @@ from fractions import Fraction
 from operator import attrgetter, itemgetter
 from typing import TYPE_CHECKING, Any
 
+from .formats.csv_format import write_rows
+from .metrics import is_circular_fisheye
+from .read import read
 from .read.paths import DatabaseSource
 from .read.records import (
     NAN,
@@ -34,6 +37,7 @@ from .read.records import (
     SourceFile,
 )
 from .read.tables import SPECS, TCA, VIGNETTING
+from .version import __version__
 
 if TYPE_CHECKING:
     import numpy as np
@@ -175,8 +179,6 @@ def load(paths: Any = None) -> Any:
     files, read with its vignetting and TCA rows; the bundled database
     without ``paths``. Raises :class:`lensaudit.read.LoadError` when the paths
     cannot be read at all."""
-    from .read import read
-
     return read(paths, calibrations=True)
 
 
@@ -201,7 +203,7 @@ _SAFE_LOW, _SAFE_HIGH = 2.0**-300, 2.0**300
 
 
 def _safe(*values: NDArray[np.float64]) -> NDArray[np.bool_]:
-    import numpy as np
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     ok = np.ones(np.shape(values[0]), dtype=bool)
     for value in values:
@@ -223,7 +225,7 @@ def turning_points(
     may be wrong in kind (a discriminant within 1e-9 of its terms, an input
     outside [2^-300, 2^300]); those need :func:`exact_turning_points`.
     """
-    import numpy as np
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     c1, c2, c3 = (np.asarray(v, dtype=np.float64) for v in (c1, c2, c3))
     low = np.full(c1.shape, np.nan)
@@ -256,7 +258,7 @@ def first_sign_change(
 
     ``inf`` where there is none; see :func:`turning_points` for ``reliable``.
     """
-    import numpy as np
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     low, high, reliable = turning_points(c1, c2, c3)
     with np.errstate(invalid="ignore"):
@@ -363,7 +365,7 @@ def sign_change_before(
     Any finite coefficients; ``limit`` may be ``inf``. NaN in any input
     gives x = NaN and ``before`` False.
     """
-    import numpy as np
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     c1, c2, c3, limit = np.broadcast_arrays(
         *(np.asarray(v, dtype=np.float64) for v in (c1, c2, c3, limit))
@@ -448,9 +450,7 @@ class CalibrationAudit:
         """The audit of loaded records (:class:`CalibrationRecords`, or entry
         objects): :meth:`compute_audited` on those with status ``ok``; the
         others' metrics are empty (NaN, False or "")."""
-        import numpy as np
-
-        from .metrics import is_circular_fisheye
+        import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
         records = CalibrationRecords.of_entries(cls.kind, entries)
         size = len(records)
@@ -545,7 +545,7 @@ class CalibrationAudit:
 
     def to_dataframe(self) -> Any:
         """The entries as a pandas DataFrame with :attr:`COLUMNS`."""
-        import pandas
+        import pandas  # pandas: only for a DataFrame, which no command needs
 
         frame = pandas.DataFrame(self.columns(), columns=list(self.COLUMNS))
         frame["line"] = frame["line"].astype("int64")
@@ -585,8 +585,6 @@ class CalibrationAudit:
     def head_lines(self, summary: dict[str, Any], entries: str) -> list[str]:
         """The first two lines of the terminal summary: the database, and the
         counts of files and of ``entries`` (say, "TCA entries") read and audited."""
-        from .version import __version__
-
         files = summary["files"]
         return [
             f"lensaudit {__version__}: {self.source.label}",
@@ -617,13 +615,10 @@ class CalibrationAudit:
 
     def write_csv(self, stream: Any) -> None:
         """One row per entry (see :func:`lensaudit.formats.csv_format.write_rows`)."""
-        from .formats.csv_format import write_rows
-
         write_rows(stream, self.COLUMNS, self.columns().values())
 
     def document(self) -> dict[str, Any]:
         """The JSON document as Python data (strict JSON: inf as "inf", NaN as null)."""
-        from .version import __version__
 
         def clean(value: Any) -> Any:
             if isinstance(value, float):
@@ -648,7 +643,7 @@ class CalibrationAudit:
         }
 
     def write_json(self, stream: Any) -> None:
-        import json
+        import json  # json: a scan in another format does not import it
 
         json.dump(self.document(), stream, indent=1, allow_nan=False)
         stream.write("\n")

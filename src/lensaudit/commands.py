@@ -8,12 +8,20 @@ console command (:mod:`lensaudit.console`) and for the click command alike.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 from collections import namedtuple
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import import_module
 from pathlib import Path
+
+from .formats import writer
+from .pipeline import run as audit
+from .read import Cache, read
+from .read.paths import display_path
+from .read.records import LoadError
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -104,8 +112,6 @@ def fail(message: str) -> NoReturn:
 
 def os_error_message(error: OSError) -> str:
     """The one line an error of the file system is reported with."""
-    from .read.paths import display_path
-
     where = f"{display_path(error.filename)}: " if error.filename is not None else ""
     return f"lensaudit: error: {where}{error.strerror or error}"
 
@@ -137,10 +143,6 @@ def single_blas_thread() -> None:
 
 def scan(arguments: ScanArguments) -> None:
     """Run ``lensaudit scan`` (see ``lensaudit scan --help``)."""
-    import gc
-
-    from .read.records import LoadError
-
     paths = [Path(path) for path in arguments.paths]
     output = None if arguments.output is None else Path(arguments.output)
     single_blas_thread()
@@ -152,8 +154,6 @@ def scan(arguments: ScanArguments) -> None:
         if arguments.kind != "distortion":
             _scan_calibrations(paths, arguments, output)
             return
-        from .formats import writer
-        from .pipeline import run as audit
 
         try:
             result = audit(paths or None, cache=arguments.cache)
@@ -172,11 +172,6 @@ def scan(arguments: ScanArguments) -> None:
 
 def _scan_calibrations(paths: list[Path], arguments: ScanArguments, output: Path | None) -> None:
     """``scan --kind vignetting|tca``: read the elements of that kind and audit them."""
-    from importlib import import_module
-
-    from .read import Cache, read
-    from .read.records import LoadError
-
     try:
         cache = Cache() if arguments.cache else None
         database = read(paths or None, cache=cache, calibrations=True)

@@ -64,7 +64,7 @@ def dispatch(words: list[str]) -> int:
     arguments = scan_arguments(words[1:]) if words[:1] == ["scan"] else None
     if arguments is not None:
         return _scan_directly(arguments)
-    from .cli import main
+    from .cli import main  # click: a plain scan runs without it
 
     try:
         main(words)  # click's standalone mode: always ends in SystemExit

@@ -55,8 +55,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.polynomial import polynomial as P
 
-from . import metrics
+from . import metrics, xmlpatch
+from .pipeline import run
+from .read.paths import read_file
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
+from .xmlpatch import FilePatch, set_attributes
 
 if TYPE_CHECKING:
     import pandas
@@ -292,7 +295,7 @@ class _Program:
 
     def solve(self, radius: float, extra: Sequence[float] = ()) -> Fit | None:
         """The closest coefficients increasing up to ``radius`` (may be inf), or None."""
-        from scipy.optimize import linprog
+        from scipy.optimize import linprog  # scipy: only to refit a model
 
         count = len(self.old)
         if math.isinf(radius):
@@ -391,7 +394,7 @@ def best_fit(model: str, coefficients: Sequence[float], goal: Goal) -> Fit | Non
 
 def _search_radius(program: _Program, target: float) -> list[float]:
     """Radii T to try, best first: a coarse scan of [target, 4 target], then a bounded search."""
-    from scipy.optimize import minimize_scalar
+    from scipy.optimize import minimize_scalar  # scipy: only to refit a model
 
     radii = np.geomspace(target, _SEARCH_SPAN * target, _SEARCH_POINTS)
 
@@ -741,9 +744,6 @@ def read_sources(audit: Audit, indices: Sequence[int]) -> SourceTexts:
     file changed since the audit read it), or whose file cannot be read, is
     noted in ``problems`` with the reason.
     """
-    from . import xmlpatch
-    from .read.paths import read_file
-
     paths = {f.name: f.path for f in audit.files}
     unreadable: dict[str, str] = {}
     sources = SourceTexts()
@@ -808,8 +808,6 @@ def patches(results: Sequence[FixResult], sources: SourceTexts) -> list[FilePatc
     Only entries with status ``fixed`` are written; only their coefficient
     attributes change.
     """
-    from .xmlpatch import FilePatch, set_attributes
-
     edits: dict[str, list] = {}
     for result in results:
         if not result.fixed:
@@ -837,8 +835,6 @@ def fix(
     Returns the results and the file patches that would write them (see
     :func:`lensaudit.xmlpatch.write`); nothing is written here.
     """
-    from .pipeline import run
-
     audit = run(paths)
     indices = select(audit, margin=margin, lens=lens, focal=focal)
     sources = read_sources(audit, indices)
@@ -850,6 +846,6 @@ def fix(
 
 def to_dataframe(results: Sequence[FixResult]) -> pandas.DataFrame:
     """The results as a pandas DataFrame with :data:`RECORD_COLUMNS`."""
-    import pandas
+    import pandas  # pandas: only for a DataFrame, which no command needs
 
     return pandas.DataFrame([r.record() for r in results], columns=list(RECORD_COLUMNS))

@@ -83,7 +83,7 @@ def _exact_distortion(
     model: str, a: float, b: float, c: float, k1: float, k2: float
 ) -> list[Fraction]:
     """Coefficients of D(r) as written, highest power first, in exact arithmetic."""
-    from fractions import Fraction
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
     if model == "ptlens":
         a_, b_, c_ = Fraction(a), Fraction(b), Fraction(c)
@@ -109,7 +109,7 @@ def _exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, f
     fit (k <= 0, even for w = r^2), rounded once and solved; d_max = D(r_max)
     is evaluated exactly and rounded once, so no intermediate overflows.
     """
-    from fractions import Fraction
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
     degree = len(distortion) - 1
     # D'(r), lowest power first; its powers of w are every power-th one.

@@ -18,6 +18,7 @@ from operator import attrgetter
 from . import read
 from .columns import COLUMNS, ENTRY_COLUMNS, METRIC_COLUMNS, METRIC_FLOAT_COLUMNS, TAIL_NAMES
 from .read.records import ROW_FIELDS, STATUS_OK, DistortionEntry, SourceFile
+from .summary import summarize
 
 # typing only for type checkers: numpy and pandas are imported where needed.
 TYPE_CHECKING = False
@@ -40,14 +41,14 @@ def metric_columns(columns: dict[str, list]) -> dict[str, list]:
     -1/0/1, ``folds_in_image`` 0/1; rows whose status is not ``ok`` get NaN
     and 0. The solver's scalar kernel answers nearly every database without
     numpy; the array code takes the rest."""
-    from .solver.kernel import column_metrics
+    from .solver.kernel import column_metrics  # typing: a warm scan does not solve
 
     found = column_metrics(columns, STATUS_OK)
     if found is not None:
         return found
-    import numpy as np
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
-    from . import metrics
+    from . import metrics  # numpy
 
     audited = np.array(columns["status"], dtype=object) == STATUS_OK
     circular = list(map(metrics.is_circular_fisheye, columns["lens"], columns["type"]))
@@ -157,9 +158,9 @@ class Audit:
     @cached_property
     def metrics(self) -> metrics.Metrics:
         """The metrics as numpy arrays, one element per entry."""
-        import numpy as np
+        import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
-        from .metrics import Metrics
+        from .metrics import Metrics  # numpy
 
         columns = self._metric_columns
         return Metrics(
@@ -180,7 +181,7 @@ class Audit:
     @cached_property
     def audited(self) -> np.ndarray:
         """Boolean mask of entries with status ``ok``."""
-        import numpy as np
+        import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
         return np.array(self._entry_columns["status"], dtype=object) == STATUS_OK
 
@@ -214,13 +215,11 @@ class Audit:
     @cached_property
     def summary(self) -> Summary:
         """Tables 1 and 2, status counts and the folding entries (see :mod:`lensaudit.summary`)."""
-        from .summary import summarize
-
         return summarize(self)
 
     def to_dataframe(self) -> pandas.DataFrame:
         """The entries as a pandas DataFrame with :data:`COLUMNS`."""
-        import pandas
+        import pandas  # pandas: only for a DataFrame, which no command needs
 
         frame = pandas.DataFrame(self.columns(), columns=list(COLUMNS))
         frame["line"] = frame["line"].astype("int64")

@@ -36,6 +36,8 @@ from .calibrations import (
     sign_change_before,
 )
 from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
+from .formats.table import text_table
+from .metrics import image_radius
 
 FloatArray = NDArray[np.float64]
 
@@ -135,8 +137,6 @@ class TCAAudit(CalibrationAudit):
         circular: list[bool],
     ) -> dict[str, NDArray[Any]]:
         """:func:`compute` of audited records, each judged over its image."""
-        from .metrics import image_radius
-
         with np.errstate(all="ignore"):
             radius = image_radius(floats("aspect_ratio"), circular)
         return compute(values("model"), *map(floats, COEFFICIENTS), radius)
@@ -195,8 +195,6 @@ class TCAAudit(CalibrationAudit):
         return summary
 
     def lines(self) -> list[str]:
-        from .formats.table import text_table
-
         summary = self.summary()
         models = ", ".join(f"{n} {m}" for m, n in summary["models"].items())
         out = self.head_lines(summary, "TCA entries")

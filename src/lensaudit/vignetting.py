@@ -60,6 +60,9 @@ from .calibrations import (
     turning_points,
 )
 from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
+from .formats.table import text_table
+from .metrics import image_corner
+from .solver.arrays import min_positive_root
 
 FloatArray = NDArray[np.float64]
 
@@ -109,8 +112,6 @@ def image_radius(aspect_ratio: ArrayLike, circular: ArrayLike | None = None) -> 
     1 (the frame corner); for a circular fisheye, the circle inscribed in the
     short side, 1 / hypot(aspect, 1).
     """
-    from .metrics import image_corner
-
     corner = np.ones(np.shape(aspect_ratio))
     if circular is None:
         return corner
@@ -196,8 +197,6 @@ def compute(
     ``r_corner`` is the radius of the image judged, r = 1 at half the
     diagonal. Returns arrays keyed by column name, ``severity`` as text.
     """
-    from .solver.arrays import min_positive_root
-
     k1, k2, k3, r_corner = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (k1, k2, k3, r_corner))
     )
@@ -314,8 +313,6 @@ class VignettingAudit(CalibrationAudit):
         return summary
 
     def lines(self) -> list[str]:
-        from .formats.table import text_table
-
         summary = self.summary()
         out = self.head_lines(summary, "vignetting entries") + [
             "",

@@ -12,7 +12,8 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from .. import calibrations
+from .. import calibrations, pipeline, tca, vignetting
+from ..metrics import is_circular_fisheye
 from ..read.records import (
     STATUS_BAD_VALUE,
     STATUS_MISSING_ATTRIBUTE,
@@ -145,13 +146,11 @@ class _EntryMetrics:
 def _metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]:
     """r_max and the rest for each entry, None where r_max is infinite; entry by
     entry if the batch fails."""
-    import numpy as np
-
-    from ..pipeline import audit_entries
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     def batch(chunk: list[DistortionEntry]) -> list[_EntryMetrics | None]:
         with np.errstate(all="ignore"):  # a bad entry is a finding, not a warning
-            m = audit_entries(chunk).metrics
+            m = pipeline.audit_entries(chunk).metrics
         values = zip(
             m.r_max.tolist(),
             m.d_max.tolist(),
@@ -193,7 +192,6 @@ def _fold_finding(
             entry,
             "D(r) decreases from the image centre (D'(0) <= 0): the model folds back at once",
         )
-    from ..metrics import is_circular_fisheye
 
     image = "image circle" if is_circular_fisheye(entry.lens, entry.type) else "image corner"
     where = (
@@ -243,9 +241,7 @@ def calibration_findings(
     Their identity is content, as for distortion entries: the kind, the
     entry's own values, then its lens by name.
     """
-    import numpy as np
-
-    from .. import tca, vignetting
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
     parsed = [(index, file) for index, file in enumerate(read) if file.problem is None]

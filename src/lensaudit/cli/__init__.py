@@ -11,6 +11,7 @@ from importlib.util import find_spec
 
 import click
 
+from ..commands import os_error_message, single_blas_thread
 from ..version import __version__
 
 #: Subcommand name -> (module under lensaudit.cli, one-line help).
@@ -68,8 +69,6 @@ class LazyGroup(click.Group):
             raise  # not reached: _usage_error exits
 
     def invoke(self, ctx: click.Context):
-        from ..commands import single_blas_thread
-
         # No command does linear algebra: one BLAS thread, so that numpy starts
         # quicker and the process stays free to fork workers that parse files.
         single_blas_thread()
@@ -82,7 +81,6 @@ class LazyGroup(click.Group):
         except OSError as error:
             if isinstance(error, BrokenPipeError):
                 raise
-            from ..commands import os_error_message
 
             click.echo(os_error_message(error), err=True)
             ctx.exit(2)

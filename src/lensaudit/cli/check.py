@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 import click
 
 from ..check_formats import writer
+from ..git import GitError, GitUnavailable, top_level
+from ..read import LoadError
 from .options import cache_option, database_paths, fail, output_file, output_stream
 
 if TYPE_CHECKING:
@@ -138,9 +140,8 @@ def _run(
     cache: bool,
 ) -> CheckResult:
     """The check's result, its paths as ``output_format`` shows them."""
-    from ..check import CheckError
-    from ..check import check as run_check
-    from ..read import LoadError
+    from ..check import CheckError  # numpy (the audits): --help stays quick
+    from ..check import check as run_check  # numpy (the audits): --help stays quick
 
     try:
         result = run_check(
@@ -174,7 +175,6 @@ def _repository_roots(paths: tuple[Path, ...]) -> list[Path]:
 
 
 def _git_top_level(directory: Path) -> Path | None:
-    from ..git import GitError, GitUnavailable, top_level
 
     try:
         top = top_level(directory)

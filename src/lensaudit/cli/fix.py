@@ -9,6 +9,13 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
+from ..formats.csv_format import write_rows
+from ..formats.table import text_table
+from ..pipeline import run
+from ..read import LoadError
+from ..version import __version__
+from ..xmlpatch import PatchError, check_unchanged, unified_diff
+from ..xmlpatch import write as write_patch
 from .options import (
     cache_option,
     database_paths,
@@ -112,7 +119,6 @@ def fix(
       0  done (whether or not every entry could be fixed)
       2  bad usage, or input that could not be read or patched
     """
-    from ..xmlpatch import unified_diff
 
     _check_options(target, margin, tolerance)
     audit = _read_audit(paths, cache, write)
@@ -138,8 +144,6 @@ def fix(
 def _read_audit(paths: tuple[Path, ...], cache: bool, write: bool) -> Audit:
     """The audit of the database at ``paths``; exits with status 2 where it cannot be had
     or (with ``write``) cannot be patched."""
-    from ..pipeline import run
-    from ..read import LoadError
 
     try:
         audit = run(list(paths) or None, cache=cache)
@@ -164,8 +168,7 @@ def _refit(
     focal: float | None,
 ) -> tuple[list[FixResult], list[FilePatch]]:
     """The results for the selected entries, and the patches of the files that change."""
-    from .. import fix as stage
-    from ..xmlpatch import PatchError
+    from .. import fix as stage  # numpy: --help stays quick
 
     indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
     try:
@@ -181,8 +184,6 @@ def _refit(
 
 def _write_patches(patches: list[FilePatch]) -> list[str]:
     """Patch the files in place; the names of those written."""
-    from ..xmlpatch import PatchError, check_unchanged
-    from ..xmlpatch import write as write_patch
 
     written: list[str] = []
     try:
@@ -244,8 +245,7 @@ def _write_table(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from ..fix import FRAME, PIXELS_PER_UNIT
-    from ..formats.table import text_table
+    from ..fix import FRAME, PIXELS_PER_UNIT  # numpy: --help stays quick
 
     lines = _table_heading(audit, results, settings)
     if not results:
@@ -265,7 +265,6 @@ def _write_table(
 
 def _table_heading(audit: Audit, results: list[FixResult], settings: dict[str, Any]) -> list[str]:
     """The first lines: what was examined and how many entries were chosen."""
-    from ..version import __version__
 
     margin = settings["margin"]
     lines = [f"lensaudit {__version__} fix: {audit.source.label}"]
@@ -337,8 +336,7 @@ def _table_ending(
 
 
 def _write_csv(results: list[FixResult], stream: TextIO) -> None:
-    from ..fix import RECORD_COLUMNS
-    from ..formats.csv_format import write_rows
+    from ..fix import RECORD_COLUMNS  # numpy: --help stays quick
 
     records = [result.record() for result in results]
     write_rows(stream, RECORD_COLUMNS, ([r[name] for r in records] for name in RECORD_COLUMNS))
@@ -361,8 +359,7 @@ def _write_json(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from ..fix import FRAME, PIXELS_PER_UNIT, RECORD_COLUMNS
-    from ..version import __version__
+    from ..fix import FRAME, PIXELS_PER_UNIT, RECORD_COLUMNS  # numpy: --help stays quick
 
     entries = []
     for result in results:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import io
 import sys
 from pathlib import Path
 
 import click
 
+from ..history import HistoryError, audit_history, trend_figure
+from ..history.index import caches, key_of
 from .options import fail
 
 
@@ -92,8 +95,6 @@ def history(
 
     A progress bar is drawn when standard error is a terminal.
     """
-    from ..history import HistoryError, audit_history
-
     try:
         output_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -147,8 +148,6 @@ class _ProgressBar:
 
 
 def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
-    import io
-
     written = []
     texts = {}
     for name, write in (
@@ -186,9 +185,8 @@ def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[s
     history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
     import and to draw, and the history of an unchanged repository is the
     same), kept in the history's index (:mod:`lensaudit.history.index`)."""
+    # importlib.metadata: slow to import, only for provenance
     from importlib.metadata import PackageNotFoundError, version
-
-    from ..history.index import caches, key_of
 
     index = caches(cache)[1]
     try:
@@ -213,10 +211,6 @@ def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[s
 def _draw(result, title: str) -> dict[str, bytes]:
     """trend.png and trend.svg, drawn one after the other (the second costs a
     tenth of a second)."""
-    import io
-
-    from ..history import trend_figure
-
     figure = trend_figure(result.records(), title=title)
     figures = {}
     for name, options in (

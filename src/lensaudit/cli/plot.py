@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from ..pipeline import run
+from ..read import LoadError
 from .options import EXIT_INPUT_ERROR, cache_option, fail
 
 if TYPE_CHECKING:
@@ -63,8 +65,6 @@ def _check_format(output: Path) -> str:
 
 
 def _audit(paths: list[Path] | None, cache: bool) -> Audit:
-    from ..pipeline import run
-    from ..read import LoadError
 
     try:
         return run(paths or None, cache=cache)
@@ -85,7 +85,7 @@ def resolve_entry(
 
     An ambiguous query prints every candidate as FILE:LINE before exiting.
     """
-    from ..report import select
+    from ..report import select  # numpy and matplotlib: --help stays quick
 
     query = select.Query(lens, focal, crop)
     if entry and query:
@@ -114,7 +114,7 @@ def resolve_entry(
 
 
 def _save(figure: Any, output: Path) -> None:
-    from ..report.figures import save
+    from ..report.figures import save  # matplotlib: --help stays quick
 
     try:
         save(figure, output, _check_format(output))
@@ -154,7 +154,7 @@ def curve(
     """
     _check_format(output)
     audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
-    from ..report import curves, figures, select
+    from ..report import curves, figures, select  # numpy and matplotlib: --help stays quick
 
     m = audit.metrics
     chosen = audit.entries[index]
@@ -217,8 +217,8 @@ def warp(
     if scale is not None and not (0 < scale <= 10 and math.isfinite(scale)):
         fail("--scale must be a number in (0, 10]")
     audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
-    from ..report import figures, select
-    from ..report import warp as warping
+    from ..report import figures, select  # numpy and matplotlib: --help stays quick
+    from ..report import warp as warping  # numpy and matplotlib: --help stays quick
 
     m = audit.metrics
     chosen = audit.entries[index]
@@ -273,8 +273,8 @@ def map_command(
     _check_format(output)
     if not k_range[0] < k_range[1]:
         fail("--range needs MIN < MAX")
-    from ..report import figures
-    from ..report.rmax_map import DEFAULT_K3, rmax_map
+    from ..report import figures  # numpy and matplotlib: --help stays quick
+    from ..report.rmax_map import DEFAULT_K3, rmax_map  # numpy: --help stays quick
 
     grid = rmax_map(tuple(k3_values) or DEFAULT_K3, k_range, resolution)
     _save(figures.map_figure(grid), output)

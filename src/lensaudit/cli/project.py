@@ -16,6 +16,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
+from .. import read
+from ..formats.csv_format import write_rows
+from ..read import LoadError, display_path
+from ..read.records import STATUS_OK
 from .options import fail, output_file, output_stream
 
 if TYPE_CHECKING:
@@ -103,7 +107,7 @@ def project(
           --size 6000x4000
       lensaudit project points.csv --opencv 1000,1000,959.5,539.5,-0.3,0.1
     """
-    from ..projection import ProjectionError
+    from ..projection import ProjectionError  # numpy: --help stays quick
 
     chosen = [
         name
@@ -174,7 +178,7 @@ def _numbers(text: str, option: str) -> list[float]:
 
 
 def _opencv_camera(text: str, size: str | None) -> RadialCamera:
-    from ..projection import opencv_camera
+    from ..projection import opencv_camera  # numpy: --help stays quick
 
     values = _numbers(text, "--opencv")
     if len(values) not in (4, 5, 6, 8, 9):
@@ -201,7 +205,7 @@ def _lensfun_camera(
     crop: float | None,
     real_focal: float | None,
 ) -> RadialCamera:
-    from ..projection import lensfun_camera
+    from ..projection import lensfun_camera  # numpy: --help stays quick
 
     if entry:
         found = _entry_at(entry)
@@ -215,9 +219,6 @@ def _lensfun_camera(
 
 def _entry_at(text: str) -> DistortionEntry:
     """The entry at FILE:LINE; a FILE that does not exist is looked for in the bundled database."""
-    from .. import read
-    from ..read import LoadError
-    from ..read.records import STATUS_OK
 
     name, sep, line_text = text.rpartition(":")
     if not sep or not line_text.isdigit():
@@ -249,9 +250,6 @@ def _entry_at(text: str) -> DistortionEntry:
 def _entry_by_name(
     text: str, focal: float, crop: float | None, databases: tuple[Path, ...]
 ) -> DistortionEntry:
-    from .. import read
-    from ..read import LoadError
-    from ..read.records import STATUS_OK
 
     try:
         entries = read.read(list(databases) or None).entries()
@@ -307,8 +305,6 @@ def _read_points(path: Path | None) -> np.ndarray:
         name, data = "<stdin>", _read_stdin()
         is_npy = data.startswith(_NPY_MAGIC)
     else:
-        from ..read import display_path
-
         name = _shown(display_path(path))
         data = _read_file(path, name)
         is_npy = path.suffix.lower() == ".npy" or data.startswith(_NPY_MAGIC)
@@ -367,7 +363,7 @@ def _line_at(data: bytes, offset: int) -> int:
 
 def _parse_csv(data: bytes, name: str) -> np.ndarray:
     """x, y, z from CSV: by header names when there is a header, else the first three columns."""
-    import numpy as np
+    import numpy as np  # numpy: --help stays quick
 
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):
         fail(f"{name}: UTF-16 text; save it as UTF-8 CSV")
@@ -498,7 +494,7 @@ def _shown(text: str, limit: int = _SHOWN_LIMIT) -> str:
 
 def _parse_npy(data: bytes, name: str) -> np.ndarray:
     """An N x 3 numeric array from .npy bytes; never unpickles anything."""
-    import numpy as np
+    import numpy as np  # numpy: --help stays quick
     from numpy.lib import format as npy_format
 
     if not data.startswith(_NPY_MAGIC):
@@ -545,7 +541,6 @@ def _parse_npy(data: bytes, name: str) -> np.ndarray:
 
 
 def _write_pixels(pixels: np.ndarray, valid: np.ndarray, stream: TextIO) -> None:
-    from ..formats.csv_format import write_rows
 
     write_rows(stream, ("u", "v", "valid"), (*pixels.T.tolist(), valid.tolist()))
 

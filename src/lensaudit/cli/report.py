@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from ..read import LoadError
+from ..report import ReportExistsError, audit, write_report
 from .options import cache_option, database_paths, fail
 
 
@@ -51,11 +53,9 @@ def report(
 
     Existing report files in DIR are replaced only with --force.
     """
-    from ..read import LoadError
-    from ..report import ReportExistsError, audit, write_report
-
     values = None
     if paper:
+        # numpy: `report --help` imports no heavy module (tests/test_imports.py)
         from ..report.paper import PaperValuesError, load_values
 
         try:

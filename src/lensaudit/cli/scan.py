@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from ..commands import KIND_NAMES
+from ..commands import KIND_NAMES, ScanArguments
+from ..commands import scan as run_scan
 from .options import cache_option, database_paths, format_option, output_file
 
 
@@ -67,9 +68,6 @@ def scan(
     (vignetting, tca), status and message; see docs/vignetting.md. The
     cache serves distortion only.
     """
-    from ..commands import ScanArguments
-    from ..commands import scan as run_scan
-
     run_scan(
         ScanArguments(
             tuple(map(str, paths)),

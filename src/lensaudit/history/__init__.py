@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import read
+from ..pipeline import Audit, file_metrics
 from . import blobs, commits, introduced, versions
 from .audit import Interner
 from .commits import Commit, HistoryError
@@ -233,8 +234,6 @@ def _read_in_full(
     git: commits.Git, blobs: list[str], names: dict[str, str], cache: read.Cache | None
 ) -> dict[str, tuple[read.FileTables, dict[str, list]]]:
     """{blob: (tables, metric columns)} of file versions, read through the one cache."""
-    from ..pipeline import file_metrics
-
     contents = [(data, names[blob], None) for blob, data in _contents(git, blobs)]
     found = {
         blob: (tables, file_metrics(tables, cache))
@@ -264,8 +263,6 @@ def audit_revision(
     ``path`` in ``revision``; files are named relative to ``path``. Raises
     :class:`HistoryError` when the revision or the path does not exist.
     """
-    from ..pipeline import Audit, file_metrics
-
     db_path = commits.normalized_path(path)
     git = commits.Git(repository)
     commit = git.resolve_commit(revision)

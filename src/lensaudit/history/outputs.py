@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any, TextIO
 
+from ..formats.csv_format import write_rows
+
 if TYPE_CHECKING:
     import pandas
     from matplotlib.figure import Figure
@@ -19,8 +21,6 @@ def write_csv(stream: TextIO, columns: Sequence[str], records: list[dict[str, An
     """Write ``records`` under a header of ``columns``, through lensaudit's one
     CSV writer (:func:`lensaudit.formats.csv_format.write_rows`): floats
     round-trip (``inf``; NaN empty), booleans as ``true``/``false``."""
-    from ..formats.csv_format import write_rows
-
     write_rows(stream, columns, [[record[name] for record in records] for name in columns])
 
 
@@ -53,8 +53,8 @@ def trend_figure(
     (rectilinear lenses, as in the paper). The paper's snapshot date is
     marked on both.
     """
-    import numpy as np
-    from matplotlib.figure import Figure
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
+    from matplotlib.figure import Figure  # matplotlib: only to draw
 
     records = history.to_dict("records") if hasattr(history, "to_dict") else list(history)
     rows = [r for r in records if str(r.get("mainline", True)).lower() in ("true", "1")]

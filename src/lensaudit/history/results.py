@@ -177,7 +177,7 @@ class History:
 
     def to_dataframe(self) -> pandas.DataFrame:
         """``history.csv`` as a DataFrame; ``date`` and ``author_date`` as UTC datetimes."""
-        import pandas
+        import pandas  # pandas: only for a DataFrame, which no command needs
 
         frame = pandas.DataFrame(self.records(), columns=list(HISTORY_COLUMNS))
         for name in ("date", "author_date"):
@@ -186,7 +186,7 @@ class History:
 
     def introduced_dataframe(self) -> pandas.DataFrame:
         """``introduced.csv`` as a DataFrame."""
-        import pandas
+        import pandas  # pandas: only for a DataFrame, which no command needs
 
         return pandas.DataFrame(self.introduced_records(), columns=list(INTRODUCED_COLUMNS))
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from .. import read
+from ..pipeline import file_metrics
 from ..read import parallel
 from ..read.records import MODEL_COEFFICIENTS, ROW_FIELDS, STATUS_OK, DistortionEntry
 from .commits import BlobReader, Git, HistoryError
@@ -161,8 +162,6 @@ def _read_batch(git: Git, names: dict[str, str], cache_dir: Path | None, batch: 
     """The summaries of one process's share of a round, as plain data. The
     share has a cache of its own on the same directory, saved here: its
     records are made in this process, and are not kept in memory after."""
-    from ..pipeline import file_metrics
-
     cache = None if cache_dir is None else read.Cache(cache_dir)
     reader = BlobReader(git)
     known: dict[tuple, tuple] = {}  # each identity once: marshalled once, then referred to

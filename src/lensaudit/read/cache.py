@@ -32,6 +32,7 @@ import os
 import time
 from pathlib import Path
 
+from ..version import __version__
 from .paths import read_file
 
 try:  # BLAKE2 alone: hashlib would also load OpenSSL, which a warm scan does not need
@@ -77,8 +78,6 @@ def cache_dir() -> Path:
 @functools.cache
 def fingerprint() -> bytes:
     """What records are valid for: the version and the code that makes them."""
-    from ..version import __version__
-
     package = Path(__file__).resolve().parent.parent
     digest = blake2b(f"lensaudit {__version__}".encode(), digest_size=_DIGEST_SIZE)
     for pattern in _CODE:

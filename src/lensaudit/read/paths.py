@@ -77,6 +77,7 @@ def lensfunpy_version() -> str:
         match = None
     if match:
         return match.group(1)
+    # importlib.metadata: slow to import, only for provenance
     from importlib.metadata import PackageNotFoundError, version
 
     try:
@@ -163,7 +164,7 @@ def git_commit(directory: Path) -> str:
     """Short id of the commit checked out in the git repository holding
     ``directory``, with ``+changes`` when the directory differs from it; ""
     outside a git repository or without git."""
-    import subprocess
+    import subprocess  # subprocess: only to ask git, which a scan does not
 
     environment = {**os.environ, "GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
     try:

@@ -89,7 +89,7 @@ class Parsed(
 
 def parser(recover: bool = False, **options: Any) -> etree.XMLParser:
     """An lxml parser that never touches the network, DTDs or entities."""
-    from lxml import etree
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
     return etree.XMLParser(recover=recover, **_OPTIONS, **options)
 
@@ -122,7 +122,7 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
     a time. A file that is not well-formed is visited again, from the start,
     by a new visitor, as far as libxml2's recovery mode can read it.
     """
-    from lxml import etree
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
     if b"\r" in data:  # XML's line-end normalization, done first so lines count
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
@@ -179,7 +179,7 @@ def _root_name(data: bytes) -> str:
 
 def _stream(data: bytes, visiting: Visitor, lines: _Lines | None) -> Any:
     """Parse ``data`` piece by piece (see :func:`parse`); the root, emptied."""
-    from lxml import etree
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
     pull = etree.XMLPullParser(events=("end",), tag=_TOP_LEVEL, **_OPTIONS)
     line_of = _line_getter(lines, None)
@@ -230,7 +230,7 @@ def _recovered(
     problem: str,
 ) -> tuple[Parsed, V]:
     """A file that is not well-formed: what recovery mode can read of it, visited."""
-    from lxml import etree
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
     visiting = visitor()
     try:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
-from .. import read
+from .. import pipeline, read
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -32,7 +32,7 @@ class ReportAudits(NamedTuple):
         """The audits of a database read with its calibrations; with ``cache``,
         the metrics of unchanged files are taken from it, and what is computed
         is kept there (the cache is saved)."""
-        from .. import pipeline
+        # numpy: `report --help` (this package) imports no heavy module
         from ..tca import TCAAudit
         from ..vignetting import VignettingAudit
 

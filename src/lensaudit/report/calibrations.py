@@ -10,6 +10,8 @@ from __future__ import annotations
 from html import escape
 from typing import TYPE_CHECKING, Any
 
+from . import tables
+
 if TYPE_CHECKING:
     from ..tca import TCAAudit
     from ..vignetting import VignettingAudit
@@ -20,9 +22,7 @@ WORST_SHOWN = 40
 
 def csv_text(calibration_audit: Any) -> str:
     """Every entry of one kind as CSV, the columns of ``scan --kind``."""
-    from .tables import csv_text
-
-    return csv_text(calibration_audit.COLUMNS, calibration_audit.columns().values())
+    return tables.csv_text(calibration_audit.COLUMNS, calibration_audit.columns().values())
 
 
 def _rows_table(table_id: str, caption: str, header: list[str], rows: list[list[str]]) -> str:
@@ -104,7 +104,7 @@ def _tca_folding(tca_audit: TCAAudit) -> str:
             '<p id="tca-folding">No TCA entry folds inside its image: every channel\'s '
             "r_d increases up to the image corner (or circle).</p>"
         )
-    from ..tca import FOLDING_HEADER
+    from ..tca import FOLDING_HEADER  # numpy: `report --help` imports no heavy module
 
     return _rows_table(
         "tca-folding",

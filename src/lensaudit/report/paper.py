@@ -27,10 +27,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import normalizer
+from ..formats.table import text_table
+from ..read.paths import lensfunpy_version
 from ..read.records import MODEL_COEFFICIENTS
 from ..summary import MODELS, TOTAL
 from . import select
-from .tables import percent
+from .tables import percent, to_markdown
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -444,8 +446,6 @@ def _tables_match(
 def database_name(audit: Audit) -> str:
     """How the compared database is named: its label, without local paths for the bundled one."""
     if audit.source.bundled:
-        from ..read.paths import lensfunpy_version
-
         return f"the Lensfun database bundled with lensfunpy {lensfunpy_version()}"
     return audit.source.label
 
@@ -521,8 +521,6 @@ def _arithmetic(
 
 def text_lines(comparison: Comparison) -> list[str]:
     """The comparison as plain text, for a terminal."""
-    from ..formats.table import text_table
-
     out = [
         f"The paper's values (left of |) beside lensaudit's (right) for {comparison.database}",
         "",
@@ -551,8 +549,6 @@ def text_lines(comparison: Comparison) -> list[str]:
 
 def markdown(comparison: Comparison) -> str:
     """The comparison as Markdown (``paper_comparison.md`` of a report)."""
-    from .tables import to_markdown
-
     out = [
         f"# The paper reproduced: {comparison.database}",
         "",

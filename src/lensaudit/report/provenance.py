@@ -80,7 +80,7 @@ def _timestamps(paths: tuple[Path, ...]) -> str:
 
 def content_hash(files: list[Path]) -> str:
     """SHA-256 over the names and bytes of the files, in the order given."""
-    import hashlib
+    import hashlib  # hashlib: only for the report's content hashes
 
     digest = hashlib.sha256()
     for file in files:

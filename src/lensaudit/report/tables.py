@@ -15,6 +15,8 @@ import re
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from ..formats.csv_format import write_rows
+
 if TYPE_CHECKING:
     from ..summary import Summary
 
@@ -53,8 +55,6 @@ def table2_rows(summary: Summary) -> list[Row]:
 def csv_text(header: Sequence[str], columns: Iterable[Iterable[Any]]) -> str:
     """CSV text of a header line and columns of values, written by
     :func:`lensaudit.formats.csv_format.write_rows`."""
-    from ..formats.csv_format import write_rows
-
     out = io.StringIO()
     write_rows(out, header, columns)
     return out.getvalue()

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .curves import distortion_coefficients
+
 if TYPE_CHECKING:
     from ..read.records import DistortionEntry
 
@@ -166,6 +168,7 @@ def lensfun_warp(
 ) -> Warp:
     """The warp of liblensfun's undistortion map for the entry on a ``width`` x ``height``
     image (camera crop factor = the calibration's), from :mod:`lensaudit.projection`."""
+    # optional: lensaudit.projection may be absent (see projection_available)
     from .. import projection
 
     camera = projection.lensfun_camera(entry, width, height)
@@ -189,7 +192,7 @@ def lensfun_warp(
 
 def projection_available() -> bool:
     """Whether :mod:`lensaudit.projection` offers what :func:`lensfun_warp` uses."""
-    try:
+    try:  # optional: lensaudit.projection may be absent
         from .. import projection
     except ImportError:
         return False
@@ -208,8 +211,6 @@ def warp_entry(
     """
     if projection_available():
         return lensfun_warp(entry, width, height, scale)
-    from .curves import distortion_coefficients
-
     return hugin_warp(
         distortion_coefficients(entry), entry.aspect_ratio, r_max, width, height, scale
     )

@@ -17,7 +17,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..formats import writer
 from ..version import __version__
+from . import calibrations, provenance, tables
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -123,7 +125,8 @@ def write_report(
     With ``paper_values`` (see :func:`lensaudit.report.paper.load_values`)
     the paper comparison is added. Returns the paths written.
     """
-    from . import calibrations, figures, histogram, html, provenance, tables
+    # numpy, matplotlib: `report --help` (this package) imports no heavy module
+    from . import figures, histogram, html
 
     audit = audits.distortion
     directory = Path(directory)
@@ -135,7 +138,7 @@ def write_report(
     fig5 = histogram.figure5(audit)
     comparison = None
     if paper_values is not None:
-        from . import paper
+        from . import paper  # numpy: `report --help` (this package) imports no heavy module
 
         comparison = paper.compare(
             audit, paper_values, paper.omitted_coefficients(audit, audits.files)
@@ -166,7 +169,7 @@ def write_report(
     _write_text(directory / "report.html", page)
     written.append(directory / "report.html")
     if comparison is not None:
-        from . import paper
+        from . import paper  # numpy: `report --help` (this package) imports no heavy module
 
         _write_text(directory / PAPER_FILE, paper.markdown(comparison))
         written.append(directory / PAPER_FILE)
@@ -191,9 +194,6 @@ def _data_files(
     fig5: Histogram,
 ) -> dict[str, str]:
     """The report's text files other than report.html, by name, in the order written."""
-    from ..formats import writer
-    from . import calibrations, tables
-
     audit = audits.distortion
     buffer = io.StringIO()
     writer("csv")(audit, buffer)
@@ -216,7 +216,7 @@ def _data_files(
 def _summary_json(audit: Audit, facts: Provenance, fig5: Histogram) -> str:
     """``summary.json``: provenance without the date, the summary, Figure 5's counts
     and where the folding entries are."""
-    from . import histogram
+    from . import histogram  # numpy: `report --help` (this package) imports no heavy module
 
     summary = audit.summary
     document = {

@@ -77,7 +77,7 @@ __all__ = [
 def __getattr__(name: str) -> Any:
     # The array code, imported when first used: it imports numpy.
     if name in __all__ or name.startswith("_"):
-        from . import arrays
+        from . import arrays  # numpy: the kernel answers without it
 
         try:
             return getattr(arrays, name)

@@ -72,7 +72,7 @@ def _q_bound(x: FloatArray, A: FloatArray, B: FloatArray, C: FloatArray) -> Floa
 
 def _exact_discriminant_sign(A: float, B: float, C: float) -> int:
     """Sign of the discriminant of x^3 + A x^2 + B x + C, in exact arithmetic."""
-    from fractions import Fraction
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
     A, B, C = Fraction(A), Fraction(B), Fraction(C)
     value = 18 * A * B * C - 4 * A**3 * C + A * A * B * B - 4 * B**3 - 27 * C * C
@@ -750,7 +750,7 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
 
     ``estimate`` only saves time: the search starts around it.
     """
-    from fractions import Fraction
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
     P = _integer_cubic(a, b, c)
     P0, P1, P2, P3 = P
