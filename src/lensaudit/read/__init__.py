@@ -123,18 +123,10 @@ def read_contents(
     None). Contents the cache does not know are parsed on every core
     (:func:`~lensaudit.read.parallel.map_sized`); with a cache, what is read
     is kept there and the cache saved."""
-    found = [_cached(data, name, path, cache, calibrations) for data, name, path in contents]
-    todo = [item for item, tables in zip(contents, found, strict=True) if tables is None]
-    if todo:
-        parse = partial(_parsed_values, calibrations=calibrations)
-        values = parallel.map_sized(
-            parse, [data for data, _, _ in todo], [len(d) for d, _, _ in todo]
-        )
-        made = iter(_made(todo, values, cache, calibrations))
-        found = [tables if tables is not None else next(made) for tables in found]
+    found = _tables(contents, cache, calibrations)
     if cache is not None:
         cache.save()
-    return found  # type: ignore[return-value]
+    return found
 
 
 def read_bytes(
@@ -149,20 +141,37 @@ def read_bytes(
     where it is (None for a file read from git or memory). With ``cache``,
     what it holds for the same bytes is used, and what is read is kept (the
     caller saves the cache)."""
-    tables = _cached(data, name, path, cache, calibrations)
-    if tables is None:
-        values = _parsed_values(data, calibrations)
-        tables = _made([(data, name, path)], [values], cache, calibrations)[0]
-    return tables
+    return _tables([(data, name, path)], cache, calibrations)[0]
+
+
+def _tables(
+    contents: Sequence[tuple[bytes, str, Path | None]], cache: Cache | None, calibrations: bool
+) -> list[FileTables]:
+    """The tables of contents: from the cache where it has them (each content's
+    digest is taken only for it), else parsed and kept there."""
+    found: list[FileTables | None] = []
+    todo: list[tuple[bytes, str, Path | None, bytes]] = []
+    for data, name, path in contents:
+        digest = content_digest(data) if cache is not None else b""
+        tables = _cached(digest, name, path, cache, calibrations)
+        if tables is None:
+            todo.append((data, name, path, digest))
+        found.append(tables)
+    if todo:
+        parse = partial(_parsed_values, calibrations=calibrations)
+        sizes = [len(data) for data, *_ in todo]
+        values = parallel.map_sized(parse, [data for data, *_ in todo], sizes)
+        made = iter(_made(todo, values, cache, calibrations))
+        found = [tables if tables is not None else next(made) for tables in found]
+    return found  # type: ignore[return-value]
 
 
 def _cached(
-    data: bytes, name: str, path: Path | None, cache: Cache | None, calibrations: bool
+    digest: bytes, name: str, path: Path | None, cache: Cache | None, calibrations: bool
 ) -> FileTables | None:
-    """The tables the cache holds for these bytes, or None."""
+    """The tables the cache holds for the content of ``digest``, or None."""
     if cache is None:
         return None
-    digest = content_digest(data)
     stored = cache.get(digest, "tables")
     stored_calibrations = cache.get(digest, "calibrations") if calibrations else None
     if stored is None or (calibrations and stored_calibrations is None):
@@ -177,16 +186,15 @@ def _cached(
 
 
 def _made(
-    todo: list[tuple[bytes, str, Path | None]],
+    todo: list[tuple[bytes, str, Path | None, bytes]],
     values: list[tuple],
     cache: Cache | None,
     calibrations: bool,
 ) -> list[FileTables]:
-    """Tables of files parsed (``values``, as :func:`_parsed_values` gives them),
-    kept in the cache."""
+    """Tables of contents parsed (``values``, as :func:`_parsed_values` gives
+    them), kept in the cache."""
     made = []
-    for (data, name, path), (stored, calibration_rows) in zip(todo, values, strict=True):
-        digest = content_digest(data)
+    for (_, name, path, digest), (stored, calibration_rows) in zip(todo, values, strict=True):
         tables = FileTables(name, path, digest, stored)
         if calibrations:
             tables.set_calibrations(calibration_rows)

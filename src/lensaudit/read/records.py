@@ -35,8 +35,6 @@ STATUS_NO_LENS = "no_lens"
 STATUS_XML_ERROR = "xml_error"
 STATUS_UNREADABLE = "unreadable"
 STATUS_NOT_DATABASE = "not_database"
-#: Statuses of a whole file: its first row of each table stands for the file.
-FILE_STATUSES = frozenset({STATUS_XML_ERROR, STATUS_NOT_DATABASE, STATUS_UNREADABLE})
 
 NAN = math.nan
 
