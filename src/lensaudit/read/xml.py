@@ -87,11 +87,11 @@ class Parsed(
         return self.problem
 
 
-def parser(recover: bool = False, **options: Any) -> etree.XMLParser:
+def parser(recover: bool = False) -> etree.XMLParser:
     """An lxml parser that never touches the network, DTDs or entities."""
     from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
-    return etree.XMLParser(recover=recover, **_OPTIONS, **options)
+    return etree.XMLParser(recover=recover, **_OPTIONS)
 
 
 #: The options of every parser: no network, DTD, entity or attribute default.
@@ -282,8 +282,12 @@ class _Lines:
                 starts.append(line)
         self.first = starts[0] if starts else 1
         self._starts = starts
-        self._next = 1  # the root's is the first
+        self._next = 0  # the start tag of the next element numbered
         self.of: dict[Any, int] = {}
+
+    def skip_root(self) -> None:
+        """Leave out the root's start tag: the pieces to come are its children."""
+        self._next = max(self._next, 1)
 
     def number(self, piece: Any) -> None:
         """Number the elements of the next piece in document order."""
@@ -301,7 +305,8 @@ def _line_getter(lines: _Lines | None, root: Any) -> Callable[[Any], int]:
         return _libxml2_line
     if root is not None:
         lines.number(root)
-        lines.of[root] = lines.first
+    else:
+        lines.skip_root()
     of = lines.of
 
     def line_of(element: Any) -> int:
