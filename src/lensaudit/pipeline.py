@@ -18,6 +18,7 @@ from operator import attrgetter
 from . import read
 from .columns import COLUMNS, ENTRY_COLUMNS, METRIC_COLUMNS, METRIC_FLOAT_COLUMNS, TAIL_NAMES
 from .read.records import ROW_FIELDS, STATUS_OK, DistortionEntry, SourceFile
+from .solver.kernel import column_metrics
 from .summary import summarize
 
 # typing only for type checkers: numpy and pandas are imported where needed.
@@ -41,8 +42,6 @@ def metric_columns(columns: dict[str, list]) -> dict[str, list]:
     -1/0/1, ``folds_in_image`` 0/1; rows whose status is not ``ok`` get NaN
     and 0. The solver's scalar kernel answers nearly every database without
     numpy; the array code takes the rest."""
-    from .solver.kernel import column_metrics  # typing: a warm scan does not solve
-
     found = column_metrics(columns, STATUS_OK)
     if found is not None:
         return found

@@ -63,7 +63,10 @@ leaves every other entry to it, so that a scan need not import numpy;
 
 from __future__ import annotations
 
-from typing import Any
+# typing only for type checkers: importing the kernel must stay light.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any
 
 __all__ = [
     "PATHS",
