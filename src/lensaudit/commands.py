@@ -154,20 +154,23 @@ def scan(arguments: ScanArguments) -> None:
         if arguments.kind != "distortion":
             _scan_calibrations(paths, arguments, output)
             return
-
         try:
             result = audit(paths or None, cache=arguments.cache)
         except LoadError as error:
             fail(str(error))
-        if result.files and all(f.error for f in result.files):
-            fail(
-                "no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in result.files)
-            )
+        _fail_if_none_read(result.files)
         with output_stream(output) as stream:
             writer(arguments.output_format)(result, stream)
     finally:
         if collecting:
             gc.enable()
+
+
+def _fail_if_none_read(files: list) -> None:
+    """Exit with status 2 when not one of the files (each with a ``name`` and an
+    ``error``) could be read."""
+    if files and all(f.error for f in files):
+        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
 
 
 def _scan_calibrations(paths: list[Path], arguments: ScanArguments, output: Path | None) -> None:
@@ -177,9 +180,7 @@ def _scan_calibrations(paths: list[Path], arguments: ScanArguments, output: Path
         database = read(paths or None, cache=cache, calibrations=True)
     except LoadError as error:
         fail(str(error))
-    files = database.files
-    if files and all(f.error for f in files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
+    _fail_if_none_read(database.files)
     audit = import_module(f"lensaudit.{arguments.kind}").of_database(database)
     with output_stream(output) as stream:
         audit.write(arguments.output_format, stream)
