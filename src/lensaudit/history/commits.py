@@ -93,11 +93,6 @@ class Git:
         except gitlayer.GitError as error:
             raise HistoryError(str(error)) from None
 
-    def blob_reader(self) -> BlobReader:
-        """Contents of blobs, one at a time, from a git process of the calling
-        process's own (see :class:`lensaudit.git.ObjectReader`)."""
-        return BlobReader(self)
-
 
 class BlobReader:
     """The contents of blobs of a repository, read as they are asked for, in any

@@ -208,7 +208,7 @@ def _made(
 
 def _parsed_values(data: bytes, calibrations: bool) -> tuple:
     """Parse one file's content: (its :attr:`FileTables.STORED` values, its
-    calibrations (see :meth:`FileTables.calibrations`) or None), as plain data."""
+    calibrations (see :meth:`FileTables.set_calibrations`) or None), as plain data."""
     parsed, found = xml.parse(data, partial(FileReader, calibrations), READ)
     distortion, lens_of_row, omitted = found.distortion, found.lens_of_row, found.omitted
     vignetting, tca = found.vignetting, found.tca

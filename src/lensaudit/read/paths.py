@@ -23,11 +23,6 @@ from .records import LoadError
 MAX_FILE_BYTES = 256 << 20
 #: Where a Lensfun checkout keeps its database, relative to the checkout.
 CHECKOUT_DATABASE = Path("data", "db")
-#: How every command's help names the database it reads without paths.
-DEFAULT_DATABASE_HELP = (
-    "without PATH, the database of the Lensfun checkout around the working "
-    "directory, else the one bundled with lensfunpy"
-)
 
 Paths = Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None
 
@@ -223,12 +218,6 @@ def _xml_entries(path: Path) -> list[tuple[str, bool]]:
             if not directory:
                 found.append((item.name, item.is_symlink()))
     return sorted(found)
-
-
-def xml_files(path: Path) -> list[Path]:
-    """The ``*.xml`` files directly inside a database directory, sorted by name.
-    Raises ``OSError`` when the directory cannot be listed."""
-    return [path / name for name, _ in _xml_entries(path)]
 
 
 def expand(paths: Paths) -> list[tuple[Path, str]]:

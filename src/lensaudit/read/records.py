@@ -177,22 +177,9 @@ class FileTables:
         self.lens_of_tca: list[int | None] | None = None
 
     def set_calibrations(self, values: tuple) -> None:
-        """Set the vignetting and TCA rows and the lens index of each, as
-        :meth:`calibrations` gives them."""
+        """Set (vignetting rows, tca rows, lens index of each vignetting row, of
+        each tca row), as the cache keeps them."""
         self.vignetting, self.tca, self.lens_of_vignetting, self.lens_of_tca = values
-
-    def calibrations(self) -> tuple:
-        """(vignetting rows, tca rows, lens index of each vignetting row, of each
-        tca row), as plain data: what the cache keeps."""
-        return self.vignetting, self.tca, self.lens_of_vignetting, self.lens_of_tca
-
-    def stored(self) -> tuple:
-        """The values the cache keeps (see :attr:`STORED`), as plain data."""
-        return (
-            self.status, self.line, self.column, self.error, self.problem,
-            [tuple(lens) for lens in self.lenses], self.distortion, self.lens_of_row,
-            self.omitted,
-        )  # fmt: skip
 
     @property
     def elements(self) -> int:
