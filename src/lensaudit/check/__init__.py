@@ -195,7 +195,11 @@ def check(
     store = reader.Cache() if cache else None  # one for the database and its baseline
     read = parse_sources(sources, store)
     del sources  # their bytes: the files are read, and memory is for what they hold
-    return _check(source, read, baseline, margin, verbose, store)
+    try:
+        return _check(source, read, baseline, margin, verbose, store)
+    finally:
+        if store is not None:
+            store.save()  # the metrics worked out by the rules
 
 
 def _check(
@@ -207,13 +211,13 @@ def _check(
     cache: reader.Cache | None,
 ) -> CheckResult:
     # inputs -> parsing (done) -> findings (-> matching, with a baseline) -> CheckResult
-    files, current = analyse_parsed(read, margin, verbose)
+    files, current = analyse_parsed(read, margin, verbose, cache)
     if baseline is None:
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
     before_read = parse_sources(baseline_sources(label, source.paths), cache)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
-    _, before = analyse_parsed(before_read, margin, verbose)
+    _, before = analyse_parsed(before_read, margin, verbose, cache)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)
     if notices:

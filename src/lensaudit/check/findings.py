@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from .. import calibrations, pipeline, tca, vignetting
 from ..metrics import is_circular_fisheye
+from ..read import Cache
 from ..read.records import (
     STATUS_BAD_VALUE,
     STATUS_MISSING_ATTRIBUTE,
@@ -72,9 +73,11 @@ def analyse(
 
 
 def analyse_parsed(
-    read: Sequence[ParsedSource], margin: float, verbose: bool
+    read: Sequence[ParsedSource], margin: float, verbose: bool, cache: Cache | None = None
 ) -> tuple[list[CheckedFile], list[Identified]]:
-    """:func:`analyse` of files already parsed; findings in file and line order."""
+    """:func:`analyse` of files already parsed; findings in file and line order.
+    The metrics of a file come from ``cache`` where it has them (see
+    :func:`lensaudit.pipeline.file_metrics`)."""
     files = [
         CheckedFile(
             f.source.display, f.source.path, f.count, f.problem.message if f.problem else ""
@@ -91,7 +94,7 @@ def analyse_parsed(
             add(index, file_identified(file))
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
-    for index, items in enumerate(file_findings(read, margin, verbose)):
+    for index, items in enumerate(file_findings(read, margin, verbose, cache)):
         for item in items:
             add(index, item)
     for index, item in duplicate_lenses(read):
@@ -101,7 +104,7 @@ def analyse_parsed(
 
 
 def file_findings(
-    read: Sequence[ParsedSource], margin: float, verbose: bool
+    read: Sequence[ParsedSource], margin: float, verbose: bool, cache: Cache | None = None
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records and duplicate focal lengths (none for a file
@@ -111,7 +114,7 @@ def file_findings(
     if not parsed:
         return found  # numpy and the audits are not needed
     entries = [(index, entry) for index in parsed for entry in read[index].entries]
-    metrics = _metrics([entry for _, entry in entries])
+    metrics = _metrics([read[index] for index in parsed], [entry for _, entry in entries], cache)
     for position, (index, entry) in enumerate(entries):
         if entry.status != STATUS_OK:
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
@@ -143,9 +146,27 @@ class _EntryMetrics:
     problem: str = ""
 
 
-def _metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]:
-    """r_max and the rest for each entry, None where r_max is infinite; entry by
-    entry if the batch fails."""
+def _metrics(
+    files: list[ParsedSource], entries: list[DistortionEntry], cache: Cache | None
+) -> list[_EntryMetrics | None]:
+    """r_max and the rest for each entry of ``files`` (``entries``, those of
+    files without a file-level problem), None where r_max is infinite: the
+    pipeline's metrics of each file, from the cache where it has them; entry
+    by entry where they cannot be had."""
+    try:
+        found = []
+        for file in files:
+            m = pipeline.file_metrics(file.tables, cache)
+            values = zip(m["r_max"], m["d_max"], m["r_corner"], m["r_normalized"], strict=True)
+            # None for the common case, a model that never folds: nothing to report.
+            found += [None if v[0] == math.inf else _EntryMetrics(*v) for v in values]
+        return found
+    except Exception:  # noqa: BLE001 - one bad entry must not hide the others' findings
+        return _entry_metrics(entries)
+
+
+def _entry_metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]:
+    """:func:`_metrics` of entries, in one batch, or entry by entry if it fails."""
     import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
     def batch(chunk: list[DistortionEntry]) -> list[_EntryMetrics | None]:
