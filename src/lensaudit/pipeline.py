@@ -100,10 +100,16 @@ def run(
     status instead.
     """
     store = read.Cache() if cache is True else (cache or None)
-    database = read.read(paths, cache=store)
-    found = [file_metrics(tables, store) for tables in database.files]
-    if store is not None:
-        store.save()
+    return audit_database(read.read(paths, cache=store), store)
+
+
+def audit_database(database: read.Database, cache: read.Cache | None = None) -> Audit:
+    """The audit of a database read (see :func:`lensaudit.read.read`); with
+    ``cache``, the metrics of unchanged files are taken from it, and those
+    computed are kept there (the cache is saved)."""
+    found = [file_metrics(tables, cache) for tables in database.files]
+    if cache is not None:
+        cache.save()
     return Audit.of_files(database.source, database.files, found)
 
 

@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import read
-from ..pipeline import Audit, file_metrics
+from ..pipeline import Audit, audit_database, file_metrics
 from . import blobs, commits, introduced, versions
 from .audit import Interner
 from .commits import Commit, HistoryError
@@ -282,4 +282,4 @@ def audit_revision(
     source = read.DatabaseSource(
         (Path(repository),), f"{db_path} at {revision} ({commit[:7]}) of {repository}"
     )
-    return Audit.of_files(source, found, [file_metrics(tables, None) for tables in found])
+    return audit_database(read.Database(source, found))

@@ -36,11 +36,8 @@ class ReportAudits(NamedTuple):
         from ..tca import TCAAudit
         from ..vignetting import VignettingAudit
 
-        metrics = [pipeline.file_metrics(tables, cache) for tables in database.files]
-        if cache is not None:
-            cache.save()
         return cls(
-            pipeline.Audit.of_files(database.source, database.files, metrics),
+            pipeline.audit_database(database, cache),
             VignettingAudit.of_database(database),
             TCAAudit.of_database(database),
             database.files,
