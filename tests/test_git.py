@@ -178,37 +178,3 @@ def test_object_sizes_are_the_contents_lengths(repo):
     names = [blob_id(SECOND), "no-such-object", blob_id(BINARY)]
     assert git.object_sizes(repo["path"], names) == [len(SECOND), None, len(BINARY)]
     assert git.object_sizes(repo["path"], []) == []
-
-
-def test_an_object_reader_answers_each_request_as_it_comes(repo):
-    reader = git.ObjectReader(repo["path"])
-    try:
-        assert reader.read(blob_id(BINARY)) == (blob_id(BINARY), "blob", BINARY)
-        assert reader.read("no-such-object") is None
-        assert reader.read(f"{repo['second']}:data/db/a.xml") == (blob_id(SECOND), "blob", SECOND)
-    finally:
-        reader.close()
-
-
-def test_an_object_reader_starts_its_own_git_in_a_forked_process(repo):
-    reader = git.ObjectReader(repo["path"])
-    assert reader.read(blob_id(FIRST))[2] == FIRST  # the parent's git, started before the fork
-    read, write = os.pipe()
-    child = os.fork()
-    if child == 0:  # pragma: no cover (the child's outcome is its exit status)
-        os.close(read)
-        ok = reader.read(blob_id(SECOND))[2] == SECOND and len(reader._processes) == 2
-        os.write(write, b"1" if ok else b"0")
-        os._exit(0)
-    os.close(write)
-    assert os.read(read, 1) == b"1"
-    os.close(read)
-    os.waitpid(child, 0)
-    assert reader.read(blob_id(BINARY))[2] == BINARY  # the parent's own git still answers
-    reader.close()
-
-
-def test_an_object_reader_without_git_raises_git_unavailable(repo, monkeypatch, tmp_path):
-    monkeypatch.setenv("PATH", str(tmp_path))
-    with pytest.raises(git.GitUnavailable):
-        git.ObjectReader(repo["path"]).read(blob_id(FIRST))

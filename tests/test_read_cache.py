@@ -133,9 +133,9 @@ def solves(monkeypatch) -> list[int]:
     calls: list[int] = []
     real = pipeline.metric_columns
 
-    def counting(columns):
+    def counting(columns, *memo):
         calls.append(len(columns["status"]))
-        return real(columns)
+        return real(columns, *memo)
 
     monkeypatch.setattr(pipeline, "metric_columns", counting)
     return calls

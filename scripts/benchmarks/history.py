@@ -6,7 +6,10 @@ Every command runs in a fresh process, in turns, and the medians are shown
 with their ratio to the anchor: a cold ``lensaudit scan --no-cache`` of the
 head revision's ``data/db``. "cold" is ``lensaudit history`` with an empty
 cache, "warm" the same run again, "one new commit" a run whose cache holds
-the history up to the parent of the head. The naive way (read each revision
+the history up to the parent of the head. Each of the history's two memos
+(the reader's lens memo, :class:`lensaudit.read.Pieces`, and the solver's
+memo of entries) is switched off in turn by a patch for an A/B of "cold";
+"saves" is the share of that time the memo saves. The naive way (read each revision
 through git, parse, audit) is timed in-process on revisions spread evenly
 over the history and extrapolated to all of them. Needs
 ../shared/data/lensfun-db-history.bundle beside the project (cloned into a
@@ -18,6 +21,7 @@ from __future__ import annotations
 import os
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -32,15 +36,30 @@ BUNDLE = Path(__file__).resolve().parents[3] / "shared" / "data" / "lensfun-db-h
 #: The goals, as multiples of a cold scan of one revision.
 GOALS = {"cold": 25.0, "warm": 5.0}
 
+_RUN = "from lensaudit.console import run\nrun()\n"
+#: The history's two memos, each switched off by a patch (the A/B of "cold").
+SWITCHES = {
+    "lens memo": (
+        "import lensaudit.read.xml as x\nx.Pieces.usable = lambda self, data, read: False\n"
+    ),
+    "solver memo": (
+        "import lensaudit.history.versions as v\n"
+        "real = v.file_metrics\n"
+        "v.file_metrics = lambda tables, cache, memo=None: real(tables, cache)\n"
+    ),
+}
 
-def _command(*arguments: str) -> list[str]:
+
+def _command(*arguments: str, patch: str = "") -> list[str]:
+    if patch:
+        return [sys.executable, "-c", patch + _RUN, *arguments]
     return lensaudit_command(*arguments)
 
 
-def _timed(arguments: list[str], environment: dict[str, str]) -> float:
+def _timed(arguments: list[str], environment: dict[str, str], patch: str = "") -> float:
     started = time.perf_counter()
     subprocess.run(
-        _command(*arguments),
+        _command(*arguments, patch=patch),
         check=True,
         env=environment,
         stdout=subprocess.DEVNULL,
@@ -62,6 +81,7 @@ def run(quick: bool) -> list[dict]:
         out = str(work / "out")
         history = ["history", str(clone), "-o", out, "-q", "--cache"]
         times: dict[str, list[float]] = {"scan": [], "cold": [], "warm": [], "new": []}
+        times |= {name: [] for name in SWITCHES}
         for turn in range(3 if quick else 5):
             times["scan"].append(
                 _timed(
@@ -83,16 +103,22 @@ def run(quick: bool) -> list[dict]:
             else:
                 _timed([*history, cache], environment)
             times["warm"].append(_timed([*history, cache], environment))
+            for name, patch in SWITCHES.items():
+                if turn < (1 if quick else 3):
+                    off = str(work / f"cache-{name.replace(' ', '-')}-{turn}")
+                    times[name].append(_timed([*history, off], environment, patch))
             if turn < (1 if quick else 3):
                 parent = str(work / f"cache-parent-{turn}")
                 _timed([*history, parent, "--rev", "HEAD~1"], environment)
                 times["new"].append(_timed([*history, parent], environment))
         scan = statistics.median(times["scan"])
+        cold = statistics.median(times["cold"])
         labels = {
             "scan": "lensaudit scan --no-cache, head revision (the anchor)",
             "cold": "lensaudit history, empty cache",
             "warm": "lensaudit history again (warm)",
             "new": "lensaudit history, cache up to the head's parent",
+            **{name: f"lensaudit history, empty cache, {name} off (A/B)" for name in SWITCHES},
         }
         rows = []
         for key, label in labels.items():
@@ -106,6 +132,7 @@ def run(quick: bool) -> list[dict]:
                     "x scan": seconds / scan,
                     "goal": f"<= {goal:g}x" if goal else "",
                     "met": ("yes" if seconds / scan <= goal else "NO") if goal else "",
+                    "saves": f"{1 - cold / seconds:.0%}" if key in SWITCHES else "",
                 }
             )
 
@@ -127,6 +154,7 @@ def run(quick: bool) -> list[dict]:
                 "x scan": each * count / scan,
                 "goal": "",
                 "met": "",
+                "saves": "",
             }
         )
     return rows

@@ -38,7 +38,8 @@ SWITCHES = {
     "(all on)": "",
     "parallel parse": "import lensaudit.read.parallel as p\np.MIN_BYTES = 1 << 62\n",
     "scalar kernel": (
-        "import lensaudit.solver.kernel as k\nk.column_metrics = lambda columns, audited: None\n"
+        "import lensaudit.solver.kernel as k\n"
+        "k.column_metrics = lambda columns, audited, memo=None: None\n"
     ),
     "scan without click": "import lensaudit.console as c\nc.scan_arguments = lambda words: None\n",
     "no teardown": (

@@ -36,13 +36,14 @@ if TYPE_CHECKING:
 _INPUTS = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
 
 
-def metric_columns(columns: dict[str, list]) -> dict[str, list]:
+def metric_columns(columns: dict[str, list], memo: dict | None = None) -> dict[str, list]:
     """The metric columns of distortion rows given as columns (see
     :data:`~lensaudit.read.records.ROW_FIELDS`): lists of floats, ``tail``
     -1/0/1, ``folds_in_image`` 0/1; rows whose status is not ``ok`` get NaN
     and 0. The solver's scalar kernel answers nearly every database without
-    numpy; the array code takes the rest."""
-    found = column_metrics(columns, STATUS_OK)
+    numpy; the array code takes the rest. ``memo`` is the kernel's (see
+    :func:`lensaudit.solver.kernel.column_metrics`), for many files in one run."""
+    found = column_metrics(columns, STATUS_OK, memo)
     if found is not None:
         return found
     import numpy as np  # numpy: only where arrays are needed, not on importing this module
@@ -69,8 +70,11 @@ def row_columns(rows: list[tuple]) -> dict[str, list]:
     return dict(zip(ROW_FIELDS, map(list, zip(*rows, strict=True)), strict=True))
 
 
-def file_metrics(tables: read.FileTables, cache: read.Cache | None) -> dict[str, list]:
-    """The metric columns of one file's distortion rows, from the cache where it has them."""
+def file_metrics(
+    tables: read.FileTables, cache: read.Cache | None, memo: dict | None = None
+) -> dict[str, list]:
+    """The metric columns of one file's distortion rows, from the cache where it
+    has them; ``memo`` as for :func:`metric_columns`."""
     if cache is not None and tables.digest:
         found = cache.get(tables.digest, "metrics")
         if isinstance(found, dict) and all(
@@ -78,7 +82,7 @@ def file_metrics(tables: read.FileTables, cache: read.Cache | None) -> dict[str,
             for name in METRIC_COLUMNS
         ):
             return found
-    computed = metric_columns(row_columns(tables.distortion))
+    computed = metric_columns(row_columns(tables.distortion), memo)
     if cache is not None and tables.digest:
         cache.put(tables.digest, "metrics", computed)
     return computed

@@ -48,7 +48,7 @@ from ..pipeline import Audit, audit_database, file_metrics
 from . import blobs, commits, introduced, versions
 from .audit import Interner
 from .commits import Commit, HistoryError
-from .index import caches, history_data, history_from_data
+from .index import Index, audits_kept, caches, history_data, history_from_data, keep_audits
 from .outputs import PAPER_SNAPSHOT, trend_figure
 from .results import (
     COUNT_COLUMNS,
@@ -136,7 +136,7 @@ def audit_history(
     )
     # 2. Each file version read once; 3. the revisions, and who introduced what.
     newest = next(c for c in selected if c.hash == mainline[0])
-    full, audits = _read_versions(git, files, files[newest.hash], store, progress)
+    full, audits, reused = _read_versions(git, files, files[newest.hash], (store, index), progress)
     states, revisions = introduced.walk(
         selected, outside, files, first_parent, set(mainline), audits
     )
@@ -154,8 +154,8 @@ def audit_history(
         ),
         commits=len(selected),
         blobs=len(audits),
-        blobs_read=len(audits),
-        blobs_reused=0,
+        blobs_read=len(audits) - reused,
+        blobs_reused=reused,
         seconds=time.perf_counter() - started,
         warnings=warnings,
     )
@@ -206,28 +206,37 @@ def _read_versions(
     git: commits.Git,
     files: dict[str, dict[str, str]],
     newest_files: dict[str, str],
-    store: read.Cache | None,
+    kept_in: tuple[read.Cache | None, Index | None],
     progress: Callable[[int, int], None] | None,
-) -> tuple[dict[str, tuple[read.FileTables, dict[str, list]]], dict[str, Any]]:
-    """Each file version read once: the newest revision's in full (its entries
-    are reported), the others summarized on every core. (The newest files'
-    tables and metrics by blob, and the audit of every version by blob.)"""
+) -> tuple[dict[str, tuple[read.FileTables, dict[str, list]]], dict[str, Any], int]:
+    """Each file version read once: the newest revision's in full, through the
+    one cache (its entries are reported), the others taken from the index's
+    audits of the last run, or read and summarized on every core. (The
+    newest files' tables and metrics by blob, the audit of every version by
+    blob, and how many were taken from the index.)"""
+    store, index = kept_in
     every_blob = sorted({blob for m in files.values() for blob in m.values()})
     names = {blob: name for m in files.values() for name, blob in m.items()}
     names.update((blob, name) for name, blob in newest_files.items())
+    interner = Interner()
+    kept = audits_kept(index, interner)
     full = _read_in_full(git, sorted(set(newest_files.values())), names, store)
-    summaries = {blob: versions.summarize(*found) for blob, found in full.items()}
+    audits = {blob: interner.audit(versions.summarize(*found)) for blob, found in full.items()}
+    reused = [blob for blob in every_blob if blob in kept and blob not in full]
+    audits.update((blob, kept[blob]) for blob in reused)
     if progress is not None:
-        progress(len(full), len(every_blob))
-    summaries |= versions.read_versions(
+        progress(len(audits), len(every_blob))
+    summaries = versions.read_versions(
         git,
-        [blob for blob in every_blob if blob not in full],
+        [blob for blob in every_blob if blob not in audits],
         names,
-        store,
         None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
     )
-    interner = Interner()
-    return full, {blob: interner.audit(summaries[blob]) for blob in every_blob}
+    audits.update((blob, interner.audit(summary)) for blob, summary in summaries.items())
+    audits = {blob: audits[blob] for blob in every_blob}
+    if index is not None:
+        keep_audits(index, interner, audits)
+    return full, audits, len(reused)
 
 
 def _read_in_full(

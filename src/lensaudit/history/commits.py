@@ -94,31 +94,6 @@ class Git:
             raise HistoryError(str(error)) from None
 
 
-class BlobReader:
-    """The contents of blobs of a repository, read as they are asked for, in any
-    process (a forked worker starts its own git); git's failures as :class:`HistoryError`."""
-
-    def __init__(self, git: Git) -> None:
-        self.git = git
-        self._reader = gitlayer.ObjectReader(git.repository)
-
-    def read(self, blob: str) -> bytes:
-        """The content of the blob ``blob``; HistoryError if git cannot give it."""
-        try:
-            answer = self._reader.read(blob)
-        except gitlayer.GitUnavailable as error:
-            raise HistoryError(f"cannot run git: {error}") from None
-        except gitlayer.GitError as error:
-            raise HistoryError(str(error)) from None
-        if answer is None:
-            raise HistoryError(f"git cannot read object {blob} of {self.git.repository}")
-        return answer[2]
-
-    def close(self) -> None:
-        """End the git process of the calling process, if any."""
-        self._reader.close()
-
-
 def normalized_path(path: str) -> str:
     """``path`` inside the repository in git's form (``a/b``); HistoryError if it
     leaves the repository."""

@@ -1,13 +1,17 @@
 """The history's index: what the last run gave, in one small file beside the
 one cache.
 
-File versions are kept by the one cache (:class:`lensaudit.read.Cache`: a
-record per content, with the reader's tables and the pipeline's metrics).
-The index keeps only what a whole run made of them, each entry under a
-name and a key: the last :class:`History` (``run``, keyed by the commit,
-path and selection) and the trend figures drawn from it (``trend``, keyed by
-what they show), so that the same run again costs one file read. It is the
-file ``history`` of the cache directory (``--cache DIR``: of DIR).
+The files of the newest revision are kept by the one cache
+(:class:`lensaudit.read.Cache`: a record per content, with the reader's
+tables and the pipeline's metrics), as a scan of them would keep them. The
+index keeps what a run made of the history, each entry under a name and a
+key: the summary of every file version (``versions``: its error, counts
+and the identities of its entries, not its tables), so that a run after a
+new commit reads only the versions it adds; the last :class:`History`
+(``run``, keyed by the commit, path and selection) and the trend figures
+drawn from it (``trend``, keyed by what they show), so that the same run
+again costs one file read. It is the file ``history`` of the cache
+directory (``--cache DIR``: of DIR).
 
 The file starts with a fixed header and the fingerprint of the code that
 wrote it (:func:`fingerprint`), then the BLAKE2b digest of its body, a
@@ -26,6 +30,7 @@ from pathlib import Path
 
 from .. import read
 from ..read.records import DistortionEntry
+from .audit import BlobAudit, Interner
 from .commits import Commit
 from .results import COUNT_COLUMNS, History, IntroducedEntry, Revision
 
@@ -135,6 +140,41 @@ class Index:
             except OSError:
                 pass
             self.warnings.append(f"cache {self.path} not used: {error}")
+
+
+#: The key of the file versions' summaries (the index's fingerprint covers their shape).
+_VERSIONS_KEY = "summaries"
+
+
+def audits_kept(index: Index | None, interner: Interner) -> dict[str, BlobAudit]:
+    """The audits of the file versions of the last run, by blob, their
+    identities interned by ``interner`` (none without an index, or in one
+    that does not hold them)."""
+    stored = index.get("versions", _VERSIONS_KEY) if index is not None else None
+    if stored is None:
+        return {}
+    try:
+        values, kept = stored  # type: ignore[misc]
+        numbers = list(map(interner, values))
+        same = numbers == list(range(len(numbers)))  # a new interner: numbers kept as they are
+        found = {
+            blob: BlobAudit(
+                error, tuple(counts), idents if same else tuple(numbers[i] for i in idents)
+            )
+            for blob, (error, counts, idents) in kept.items()
+        }
+    except (TypeError, ValueError, IndexError, AttributeError):
+        return {}
+    if any(len(audit.counts) != len(COUNT_COLUMNS) for audit in found.values()):
+        return {}
+    return found
+
+
+def keep_audits(index: Index, interner: Interner, audits: dict[str, BlobAudit]) -> None:
+    """Keep the audits of a run's file versions (by blob), their identities
+    interned by ``interner``, in the index in place of the last run's."""
+    kept = {blob: (audit.error, audit.counts, audit.idents) for blob, audit in audits.items()}
+    index.put("versions", _VERSIONS_KEY, (interner.values, kept))
 
 
 def _commit_data(commit: Commit | None) -> tuple | None:

@@ -1,35 +1,39 @@
 """Stage 3, versions: each distinct file version (git blob) read through
 :mod:`lensaudit.read` and summarized.
 
-A version is read as any database file is, by :func:`lensaudit.read.read_bytes`
-(its tables kept in the one cache, :class:`lensaudit.read.Cache`, by
-content), and its metrics are the pipeline's
-(:func:`lensaudit.pipeline.file_metrics`, kept in the same record). What the
-history needs of it is its :class:`Summary`: its error, its
-:data:`~.results.COUNT_COLUMNS` and the identity of each audited entry.
+A version is read as any database file is, by :func:`lensaudit.read.read_bytes`,
+and its metrics are the pipeline's (:func:`lensaudit.pipeline.file_metrics`).
+What the history needs of it is its :class:`Summary`: its error, its
+:data:`~.results.COUNT_COLUMNS` and the identity of each audited entry; the
+summaries, not the tables, are kept, in the history's index
+(:mod:`~.index`).
 
 Versions are read on every core by the reader's own mechanism
 (:func:`lensaudit.read.parallel.map_sized`), in rounds so that progress can
-be shown: each process reads its share of a round from git itself, keeps
-what it read in the cache, and sends back only summaries.
+be shown: each process reads its share of a round from git itself (one
+``git cat-file`` each) and sends back only summaries. Nearly every lens and
+entry of a version is one of an earlier version: the reader's
+:class:`lensaudit.read.Pieces` and the solver's memo
+(:func:`lensaudit.solver.kernel.column_metrics`) skip what was met before,
+and what the first share of a round learns (it is read in this process) is
+known to the later rounds.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from functools import partial
-from pathlib import Path
 from typing import NamedTuple
 
 from .. import read
 from ..pipeline import file_metrics
 from ..read import parallel
 from ..read.records import MODEL_COEFFICIENTS, ROW_FIELDS, STATUS_OK, DistortionEntry
-from .commits import BlobReader, Git, HistoryError
+from .commits import Git, HistoryError
 from .results import MODELS
 
 #: A round of versions read between two reports of progress holds about this many bytes.
-ROUND_BYTES = 32 << 20
+ROUND_BYTES = 128 << 20
 
 _FIELD = {name: index for index, name in enumerate(ROW_FIELDS)}
 _MAKER, _LENS, _TYPE, _CROP, _MODEL, _FOCAL, _STATUS = (
@@ -117,19 +121,21 @@ def read_versions(
     git: Git,
     blobs: Sequence[str],
     names: dict[str, str],
-    cache: read.Cache | None,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Summary]:
     """The summaries of file versions (``blobs``, shown as ``names``), read on
-    every core; what is read is kept in ``cache``. ``progress(done)`` is
-    called after each round with the number read so far. Raises
-    :class:`~.commits.HistoryError` when git cannot give a version."""
+    every core. ``progress(done)`` is called after each round with the
+    number read so far. Raises :class:`~.commits.HistoryError` when git
+    cannot give a version."""
     sizes = []
     for blob, size in zip(blobs, git.object_sizes(blobs), strict=True):
         if size is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         sizes.append(size)
-    read_batch = partial(_read_batch, git, names, None if cache is None else cache.root)
+    # Most lenses and entries of a version are an earlier version's: what the
+    # first share of each round learns (read here) is known to the next round's.
+    pieces, solved = read.Pieces(), {}
+    read_batch = partial(_read_batch, git, names, pieces, solved)
     found: dict[str, Summary] = {}
     for round_blobs, round_sizes in _rounds(blobs, sizes):
         shares = parallel.shares(round_sizes, parallel.cpus())
@@ -158,22 +164,22 @@ def _rounds(blobs: Sequence[str], sizes: Sequence[int]) -> list[tuple[list[str],
     return rounds
 
 
-def _read_batch(git: Git, names: dict[str, str], cache_dir: Path | None, batch: list[str]) -> list:
-    """The summaries of one process's share of a round, as plain data. The
-    share has a cache of its own on the same directory, saved here: its
-    records are made in this process, and are not kept in memory after."""
-    cache = None if cache_dir is None else read.Cache(cache_dir)
-    reader = BlobReader(git)
+def _read_batch(
+    git: Git,
+    names: dict[str, str],
+    pieces: read.Pieces,
+    solved: dict[tuple, tuple],
+    batch: list[str],
+) -> list:
+    """The summaries of one process's share of a round, as plain data.
+    ``pieces`` and ``solved`` are the reader's and the solver's memos."""
     known: dict[tuple, tuple] = {}  # each identity once: marshalled once, then referred to
     summaries = []
-    try:
-        for blob in batch:
-            tables = read.read_bytes(reader.read(blob), names[blob], cache=cache)
-            error, counts, identities = summarize(tables, file_metrics(tables, cache))
-            identities = [known.setdefault(identity, identity) for identity in identities]
-            summaries.append((error, counts, identities))
-    finally:
-        reader.close()
-    if cache is not None:
-        cache.save()
+    for blob, answer in zip(batch, git.objects(batch), strict=True):
+        if answer is None:
+            raise HistoryError(f"git cannot read object {blob} of {git.repository}")
+        tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
+        error, counts, identities = summarize(tables, file_metrics(tables, None, solved))
+        identities = [known.setdefault(identity, identity) for identity in identities]
+        summaries.append((error, counts, identities))
     return summaries

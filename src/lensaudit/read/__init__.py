@@ -31,6 +31,7 @@ from .records import (
     SourceFile,
 )
 from .tables import KINDS, READ, SPECS, TCA, VIGNETTING, FileReader, error_row
+from .xml import Pieces
 
 __all__ = [
     "KINDS",
@@ -42,6 +43,7 @@ __all__ = [
     "DistortionEntry",
     "FileTables",
     "LoadError",
+    "Pieces",
     "SourceFile",
     "display_path",
     "read",
@@ -136,16 +138,21 @@ def read_bytes(
     *,
     cache: Cache | None = None,
     calibrations: bool = False,
+    pieces: Pieces | None = None,
 ) -> FileTables:
     """The tables of one file's content; ``name`` is how it is shown, ``path``
     where it is (None for a file read from git or memory). With ``cache``,
     what it holds for the same bytes is used, and what is read is kept (the
-    caller saves the cache)."""
-    return _tables([(data, name, path)], cache, calibrations)[0]
+    caller saves the cache). With ``pieces``, lenses met before in other
+    contents are not parsed again (see :class:`~lensaudit.read.xml.Pieces`)."""
+    return _tables([(data, name, path)], cache, calibrations, pieces)[0]
 
 
 def _tables(
-    contents: Sequence[tuple[bytes, str, Path | None]], cache: Cache | None, calibrations: bool
+    contents: Sequence[tuple[bytes, str, Path | None]],
+    cache: Cache | None,
+    calibrations: bool,
+    pieces: Pieces | None = None,
 ) -> list[FileTables]:
     """The tables of contents: from the cache where it has them (each content's
     digest is taken only for it), else parsed and kept there."""
@@ -158,7 +165,7 @@ def _tables(
             todo.append((data, name, path, digest))
         found.append(tables)
     if todo:
-        parse = partial(_parsed_values, calibrations=calibrations)
+        parse = partial(_parsed_values, calibrations=calibrations, pieces=pieces)
         sizes = [len(data) for data, *_ in todo]
         values = parallel.map_sized(parse, [data for data, *_ in todo], sizes)
         made = iter(_made(todo, values, cache, calibrations))
@@ -206,10 +213,10 @@ def _made(
     return made
 
 
-def _parsed_values(data: bytes, calibrations: bool) -> tuple:
+def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None) -> tuple:
     """Parse one file's content: (its :attr:`FileTables.STORED` values, its
     calibrations (see :meth:`FileTables.set_calibrations`) or None), as plain data."""
-    parsed, found = xml.parse(data, partial(FileReader, calibrations), READ)
+    parsed, found = xml.parse(data, partial(FileReader, calibrations), READ, pieces)
     distortion, lens_of_row, omitted = found.distortion, found.lens_of_row, found.omitted
     vignetting, tca = found.vignetting, found.tca
     lens_of_vignetting, lens_of_tca = found.lens_of_vignetting, found.lens_of_tca

@@ -502,6 +502,8 @@ class FileReader:
 
     def __init__(self, calibrations: bool) -> None:
         self.tags = (_DISTORTION, VIGNETTING, TCA) if calibrations else (_DISTORTION,)
+        #: What a lens's tables depend on besides its tree (for :class:`~.xml.Pieces`).
+        self.kind = self.tags
         self.lenses: list[tuple] = []
         self.distortion: list[tuple] = []
         self.lens_of_row: list[int | None] = []
@@ -526,6 +528,43 @@ class FileReader:
             else:
                 rows[tag].append(SPECS[tag].row(element, context, line_of(element)))  # type: ignore[union-attr]
                 lens_of[tag].append(context.index)  # type: ignore[union-attr]
+
+    def _tables(self) -> tuple[list | None, ...]:
+        """Every table, in the order of :meth:`taken`: the rows (each starting
+        with a line), the lens of each row, then omitted coefficients."""
+        return (
+            self.lenses, self.distortion, self.vignetting, self.tca,
+            self.lens_of_row, self.lens_of_vignetting, self.lens_of_tca, self.omitted,
+        )  # fmt: skip
+
+    def taken(self) -> tuple | None:
+        """The tables read so far, for :meth:`extend` into another reader; None
+        if a row is not ``ok`` (its message may name a line)."""
+        tables = self._tables()
+        if (
+            any(row[_LENS_PROBLEM] for row in self.lenses)
+            or any(row[-2] != STATUS_OK for rows in tables[1:4] if rows for row in rows)
+            or any(None in lens_of for lens_of in tables[4:7] if lens_of)
+        ):
+            return None
+        return tables
+
+    def extend(self, taken: tuple, line: int) -> None:
+        """Add what another reader read (:meth:`taken`), its lines counted from
+        ``line`` and its lenses after this reader's."""
+        first = len(self.lenses)
+        tables = self._tables()
+        for table, rows in zip(tables[:4], taken[:4], strict=True):
+            if table is not None:
+                table += [(row[0] + line, *row[1:]) for row in rows]
+        for table, indices in zip(tables[4:7], taken[4:7], strict=True):
+            if table is not None:
+                table += [index + first for index in indices]
+        self.omitted += taken[7]
+
+
+#: Where a lens row (see :func:`read_lens`) says why its entries cannot be audited.
+_LENS_PROBLEM = 8
 
 
 #: The elements a :class:`FileReader` reads (what a root may be to be read whole).

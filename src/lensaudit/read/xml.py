@@ -21,7 +21,7 @@ from .records import STATUS_NOT_DATABASE, STATUS_OK, STATUS_XML_ERROR
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterator
     from typing import Any, Protocol, TypeVar
 
     from lxml import etree
@@ -52,6 +52,9 @@ _REFERENCE = re.compile(
     rb"|(&(?!(?:lt|gt|amp|quot|apos|#[0-9]+|#x[0-9a-fA-F]+);)[^;\s<&\"']{0,40};?)",
     re.DOTALL,
 )
+
+#: A reference to anything but the five and a character, wherever it stands.
+_SUSPECT = re.compile(rb"&(?!(?:lt|gt|amp|quot|apos|#[0-9]+|#x[0-9a-fA-F]+);)")
 
 
 class Parsed(
@@ -112,7 +115,12 @@ _FEED = 1 << 20
 _TOP_LEVEL = ("lens", "camera", "mount")
 
 
-def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> tuple[Parsed, V]:
+def parse(
+    data: bytes,
+    visitor: Callable[[], V],
+    read: tuple[str, ...] = (),
+    pieces: Pieces | None = None,
+) -> tuple[Parsed, V]:
     """Parse one file's content as liblensfun reads it (without namespaces),
     handing its pieces to a visitor made by ``visitor()``; ``read`` names
     the elements the visitor reads (for a root that is one of them).
@@ -121,6 +129,9 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
     soon as it is complete, then dropped, so that memory holds one piece at
     a time. A file that is not well-formed is visited again, from the start,
     by a new visitor, as far as libxml2's recovery mode can read it.
+
+    With ``pieces``, the top-level ``<lens>`` elements it has met before are
+    not parsed again (see :class:`Pieces`).
     """
     from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
@@ -130,6 +141,10 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
     if found is not None:
         return _recovered(data, visitor, read, *found)
     lines = _Lines(data) if data.count(b"\n") >= _LIBXML2_LINES else None
+    if pieces is not None and lines is None and pieces.usable(data, read):
+        known = pieces.parse(data, visitor)
+        if known is not None:
+            return _checked_root(*known, lines)
     visiting = visitor()
     try:
         # Read as one tree: names in namespaces, a root that is an element read,
@@ -146,6 +161,11 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
             root = _stream(data, visiting, lines)
     except etree.XMLSyntaxError as error:
         return _recovered(data, visitor, read, *syntax_error(data, error))
+    return _checked_root(root, visiting, lines)
+
+
+def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed, V]:
+    """What a well-formed document whose root is ``root`` is: a database or not."""
     if root.tag != DATABASE_ROOT:
         tag = root.tag if isinstance(root.tag, str) else "?"
         if len(tag) > 40:
@@ -154,6 +174,170 @@ def parse(data: bytes, visitor: Callable[[], V], read: tuple[str, ...] = ()) -> 
         line = lines.first if lines is not None else root.sourceline or 1
         return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
     return Parsed(), visiting
+
+
+class Pieces:
+    """The top-level ``<lens>`` elements met so far, by their bytes: for reading
+    many versions of the same files in one run (``lensaudit history``), where
+    nearly every lens of a version is one of an earlier version, often on
+    other lines.
+
+    A document is parsed with each lens met before (or, met for the first
+    time, parsed alone into its own document) replaced by a processing
+    instruction that holds its number and as many line breaks; the visitor
+    is handed the lens's tables where the instruction is found, moved to
+    its line (``taken()`` and ``extend(found, line)`` of
+    :class:`~lensaudit.read.tables.FileReader`). This gives what parsing
+    the whole document would, because:
+
+    - a piece is used only where it parsed alone, inside a root element, as
+      exactly one element: so it parses to the same tree, with the same
+      lines relative to its first, wherever it stands in a root's content,
+      in any document without namespaces, entities declared, or an
+      encoding other than UTF-8 (only such documents are read this way);
+    - the document parsed must be well-formed, with every instruction put
+      in found in order as a child of the root (not inside a comment or
+      text), and the document must not hold such instructions itself; so
+      the document is well-formed with each lens in place of its
+      instruction, and every line outside the lenses is where it was.
+
+    Anything else, an error included, is parsed again whole, so messages
+    and positions are those of the document itself. Only lenses whose every
+    row is ``ok`` are kept (a message may name a line). Bounded: everything
+    is forgotten past :attr:`MAX_BYTES` of lenses kept.
+    """
+
+    MAX_BYTES = 64 << 20
+
+    def __init__(self) -> None:
+        self._known: dict[tuple[Any, bytes], Any] = {}
+        self._size = 0
+
+    def usable(self, data: bytes, read: tuple[str, ...]) -> bool:
+        """Whether a document may be read this way (see above)."""
+        declared = _ENCODING.match(data)
+        return (
+            (declared is None or declared.group(1).lower() in (b"utf-8", b"utf8"))
+            and b"xmlns" not in data
+            and _PLACE not in data
+            and not _declares(data)
+            and _root_name(data) not in read
+        )
+
+    def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
+        """(root, visitor) of a document read this way; None where it cannot be."""
+        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+        kind = getattr(visitor(), "kind", None)
+        parts: list[bytes] = []
+        placed: list[tuple[int, Any]] = []
+        position, line = 0, 1
+        for start, end in _lens_spans(data):
+            piece = data[start:end]
+            found = self._known.get((kind, piece))
+            if found is None:
+                found = self._learn(kind, piece, visitor)
+            if found is _UNUSABLE:
+                continue
+            line += data.count(b"\n", position, start)
+            breaks = piece.count(b"\n")
+            parts += (data[position:start], b"<?%s %d%s?>" % (_PLACE, len(placed), b"\n" * breaks))
+            placed.append((line, found))
+            line += breaks
+            position = end
+        if not placed:
+            return None
+        parts.append(data[position:])
+        visiting = visitor()
+        placing = _Placing(visiting, placed)
+        try:
+            root = _stream(b"".join(parts), placing, None)
+        except etree.XMLSyntaxError:
+            return None
+        return (root, visiting) if placing.complete() else None
+
+    def _learn(self, kind: Any, piece: bytes, visitor: Callable[[], V]) -> Any:
+        """The tables of a lens met for the first time, parsed alone, kept; or
+        :data:`_UNUSABLE`."""
+        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+        found = _UNUSABLE
+        try:
+            root = etree.fromstring(b"<r>" + piece + b"</r>", parser())
+        except etree.XMLSyntaxError:
+            root = None
+        # The bytes start with "<lens" and end with ">": one child, one element.
+        if root is not None and len(root) == 1:
+            visiting = visitor()
+            visiting.add(root[0], _relative_line)
+            taken = visiting.taken()  # type: ignore[attr-defined]
+            if taken is not None:
+                found = taken
+        if self._size + len(piece) > self.MAX_BYTES:
+            self._known.clear()
+            self._size = 0
+        self._known[kind, piece] = found
+        self._size += len(piece)
+        return found
+
+
+#: What :class:`Pieces` keeps of a lens it cannot use.
+_UNUSABLE = object()
+#: The target of the processing instruction that stands for a lens (see :class:`Pieces`).
+_PLACE = b"lensaudit-piece"
+_LENS_END = re.compile(rb"</lens\s*>")
+
+
+def _lens_spans(data: bytes) -> Iterator[tuple[int, int]]:
+    """(start, end) of each lens element, from its start tag to the first end
+    tag of a lens after it: a guess (inside a comment, nested ...), which
+    :class:`Pieces` checks."""
+    find, match = data.find, _LENS_END.match
+    start = find(b"<lens")
+    while start >= 0:
+        if data[start + 5 : start + 6] in (b">", b" ", b"\t", b"\n"):
+            end = find(b"</lens", start)
+            if end < 0:
+                return
+            found = match(data, end)
+            if found is not None:
+                yield start, found.end()
+                start = find(b"<lens", found.end())
+                continue
+        start = find(b"<lens", start + 5)
+
+
+_ENCODING = re.compile(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([^\"']*)[\"']")
+
+
+def _relative_line(element: Any) -> int:
+    """An element's line, relative to the first line of a piece parsed alone."""
+    return (element.sourceline or 1) - 1
+
+
+class _Placing:
+    """A visitor that hands the lenses :class:`Pieces` put in place of their
+    instructions to another, checking that each is found once, in order."""
+
+    def __init__(self, visiting: Any, placed: list[tuple[int, Any]]) -> None:
+        self.add = visiting.add
+        self._extend = visiting.extend
+        self._placed = placed
+        self._next = 0
+        self._wrong = False
+
+    def instruction(self, instruction: Any) -> None:
+        if instruction.target != _PLACE.decode():
+            return
+        if self._next >= len(self._placed) or (instruction.text or "").split() != [str(self._next)]:
+            self._wrong = True
+            return
+        line, found = self._placed[self._next]
+        self._extend(found, line)
+        self._next += 1
+
+    def complete(self) -> bool:
+        return not self._wrong and self._next == len(self._placed)
 
 
 #: A document type that declares nothing itself: a name and an external identifier.
@@ -209,6 +393,8 @@ def _visit_piece(
         lines.number(piece)
     if isinstance(piece.tag, str):  # comments have a function as tag
         visiting.add(piece, line_of)
+    elif hasattr(piece, "target") and hasattr(visiting, "instruction"):
+        visiting.instruction(piece)
 
 
 def _visit_tree(root: Any, visiting: Visitor, read: tuple[str, ...], line_of: Callable) -> None:
@@ -323,6 +509,8 @@ def _libxml2_line(element: Any) -> int:
 def unknown_reference(data: bytes) -> tuple[int, int, str] | None:
     """(line, column, problem) of the first reference to an entity other than
     XML's five, or None."""
+    if _SUSPECT.search(data) is None:  # no reference to anything else anywhere
+        return None
     for match in _REFERENCE.finditer(data):
         if match.group(1) is not None:
             start = match.start()

@@ -23,6 +23,7 @@ binary64 range.
 from __future__ import annotations
 
 import math
+import struct
 
 from ..columns import METRIC_COLUMNS
 from .constants import ABSENT as _ABSENT
@@ -403,16 +404,30 @@ _CORNERS: dict[float, float] = {}
 #: The metrics of an entry that is not audited.
 NOT_AUDITED: EntryMetrics = (_NAN, _NAN, 0, _NAN, _NAN, _NAN, _NAN, 0)
 _INPUTS = ("model", "a", "b", "c", "k1", "k2", "crop_factor", "aspect_ratio", "focal")
+#: The float inputs of an entry as bytes: its key in a memo (0.0 and -0.0 apart).
+_PACK_INPUTS = struct.Struct("<8d").pack
+#: A memo of :func:`column_metrics` is emptied when it holds more entries than this.
+MEMO_ENTRIES = 1 << 18
 
 
-def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | None:
+def column_metrics(
+    columns: dict[str, list], audited: str, memo: dict[tuple, EntryMetrics] | None = None
+) -> dict[str, list] | None:
     """The metrics of entries given as columns (as :func:`lensaudit.pipeline.row_columns`
     gives them), as lists by metric column (``tail`` -1/0/1, ``folds_in_image`` 0/1);
     only entries whose ``status`` is ``audited`` are computed. None if any of
-    them is left to the array code."""
+    them is left to the array code.
+
+    With ``memo``, an entry whose inputs are bit for bit those of one in the
+    memo takes its metrics from it (:func:`entry_metrics` is a function of
+    the bits of its inputs); those computed are added, the memo emptied past
+    :data:`MEMO_ENTRIES`."""
     found = []
     append = found.append
-    for status, lens, lens_type, *inputs in zip(
+    pack = _PACK_INPUTS
+    if memo is not None and len(memo) > MEMO_ENTRIES:
+        memo.clear()
+    for status, lens, lens_type, model, *inputs in zip(
         columns["status"],
         columns["lens"],
         columns["type"],
@@ -422,7 +437,14 @@ def column_metrics(columns: dict[str, list], audited: str) -> dict[str, list] | 
         if status != audited:
             append(NOT_AUDITED)
             continue
-        metrics = entry_metrics(*inputs, is_circular_fisheye(lens, lens_type))
+        circular = is_circular_fisheye(lens, lens_type)
+        if memo is None:
+            metrics = entry_metrics(model, *inputs, circular)
+        else:
+            key = (model, circular, pack(*inputs))
+            metrics = memo.get(key)
+            if metrics is None:
+                metrics = memo[key] = entry_metrics(model, *inputs, circular)  # type: ignore[assignment]
         if metrics is None:
             return None
         append(metrics)

@@ -1,0 +1,212 @@
+"""The reader's memo of lenses (read.Pieces) and the solver's memo of entries
+give, bit for bit, what reading and solving each file from scratch gives: on
+real file versions of every era, and on documents built to mislead them."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from history_blobs import file_versions
+from lensaudit import read
+from lensaudit.pipeline import metric_columns, row_columns
+from lensaudit.read.records import FileTables
+
+
+def tables_text(tables: FileTables) -> str:
+    """Everything read of a file, as text (NaN equal to NaN, 0.0 apart from -0.0)."""
+    values = [getattr(tables, name) for name in FileTables.STORED]
+    values += [tables.vignetting, tables.tca, tables.lens_of_vignetting, tables.lens_of_tca]
+    return repr(values)
+
+
+def read_both(contents: list[bytes], calibrations: bool = False) -> tuple[list[str], list[str]]:
+    """Each content read alone, and all of them read in turn with one memo."""
+    pieces = read.Pieces()
+    alone = [tables_text(read.read_bytes(d, "f.xml", calibrations=calibrations)) for d in contents]
+    with_memo = [
+        tables_text(read.read_bytes(d, "f.xml", calibrations=calibrations, pieces=pieces))
+        for d in contents
+    ]
+    return alone, with_memo
+
+
+def test_real_file_versions_read_with_the_memo_as_alone(tmp_path):
+    versions = file_versions(tmp_path, revisions=40)
+    alone, with_memo = read_both(versions)
+    assert len(versions) > 200
+    assert with_memo == alone
+    alone, with_memo = read_both(versions[:150], calibrations=True)
+    assert with_memo == alone
+
+
+LENS = """    <lens>
+        <maker>Tokina</maker>
+        <model>Tokina 11-16mm</model>
+        <mount>Nikon F AF</mount>
+        <cropfactor>1.5</cropfactor>
+        <calibration>
+            <distortion model="ptlens" focal="11" a="0.01" b="-0.05" c="0.02"/>
+            <distortion model="poly3" focal="16" k1="-0.01"/>
+            <tca model="poly3" focal="11" vr="1.0002" vb="0.9998"/>
+            <vignetting model="pa" focal="11" aperture="2.8" distance="10" k1="-0.3"/>
+        </calibration>
+    </lens>
+"""
+UNICODE = LENS.replace("Tokina 11-16mm", "Tok\xefna 11-16mm")
+OTHER = LENS.replace("11-16mm", "12-24mm").replace('a="0.01"', 'a="0.02"')
+REAL_FOCAL = OTHER.replace(
+    "<calibration>", '<calibration>\n            <real-focal-length focal="11" real-focal="x"/>'
+)
+
+
+def document(*parts: str, head: str = "") -> bytes:
+    return (head + '<lensdatabase version="2">\n' + "".join(parts) + "</lensdatabase>\n").encode()
+
+
+#: Documents read after one that teaches the memo LENS and OTHER: each puts
+#: the same bytes where they must not be taken for a lens, or in a context
+#: that changes what they mean.
+MISLEADING = {
+    "moved down": document("\n\n\n", OTHER, "<camera><maker>X</maker></camera>\n", LENS),
+    "in a comment": document("<!--\n", LENS, "-->\n", OTHER),
+    "comment ends inside": document("<!-- ", LENS.replace("</maker>", "</maker> -->", 1), OTHER),
+    "in CDATA": document("<camera><![CDATA[\n", LENS, "]]></camera>\n", OTHER),
+    "nested": document("<lens>\n", LENS, "</lens>\n"),
+    "after the root": document(OTHER) + LENS.encode(),
+    "our instruction": document(LENS, "<?lensaudit-piece 0?>\n", OTHER),
+    "our instruction first": document("<?lensaudit-piece 0?>\n<!--\n", LENS, "-->\n"),
+    "self-closed then a lens": document('<lens a="1"/>', LENS.lstrip()),
+    "self-closed, a space, a lens": document('<lens a="1"/>', LENS),
+    "instruction text": document(LENS.replace("<maker>", "<maker><?lensaudit-piece 1?>", 1)),
+    "latin-1": document(LENS, OTHER.replace("Tokina", "Tok\xefna")).replace(
+        "\xef".encode(), b"\xef"
+    ),
+    "latin-1 declared": b'<?xml version="1.0" encoding="ISO-8859-1"?>\n' + document(UNICODE, OTHER),
+    "utf-8 declared": b"<?xml version='1.0' encoding='UTF-8'?>\n" + document(OTHER, UNICODE),
+    "namespace": document(LENS.replace("<lens>", '<lens xmlns="urn:x">'), OTHER),
+    "entity": document(
+        LENS.replace("Tokina</maker>", "&maker;</maker>"),
+        head='<!DOCTYPE lensdatabase [<!ENTITY maker "Sigma">]>\n',
+    ),
+    "attribute default": document(
+        LENS, head="<!DOCTYPE lensdatabase [<!ATTLIST distortion a CDATA '0.5'>]>\n"
+    ),
+    "CRLF": document(LENS, OTHER).replace(b"\n", b"\r\n"),
+    "two on a line": document(LENS.rstrip() + OTHER.lstrip()),
+    "a line in a message": document(REAL_FOCAL, "\n\n", REAL_FOCAL),
+    "broken after": document(LENS, OTHER, "<lens><maker>a</lens>\n"),
+    "broken before": document("<camera>\n", LENS, OTHER),
+    "truncated": document(LENS, OTHER)[: len(LENS) + 60],
+    "root is a lens": LENS.encode(),
+    "not a database": b"<lenses>\n" + (LENS + OTHER).encode() + b"</lenses>\n",
+    "end tag with space": document(LENS.replace("</lens>", "</lens  >"), OTHER),
+    "empty lens": document("<lens/>\n<lens >\n</lens>\n", LENS),
+    "tab in start tag": document(LENS.replace("<lens>", "<lens\t>"), OTHER),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MISLEADING))
+def test_misleading_documents_read_with_the_memo_as_alone(name):
+    teacher = document(LENS, OTHER, REAL_FOCAL, UNICODE)
+    contents = [teacher, MISLEADING[name], teacher, MISLEADING[name]]
+    for calibrations in (False, True):
+        alone, with_memo = read_both(contents, calibrations)
+        assert with_memo == alone
+
+
+SNIPPETS = [
+    "<!--",
+    "-->",
+    "<![CDATA[",
+    "]]>",
+    "<lens>",
+    "</lens>",
+    "<?lensaudit-piece 0?>",
+    "<?pi x?>",
+    "&amp;",
+    "&bogus;",
+    '"',
+    "\n",
+    "\r",
+    "<camera>",
+    "</camera>",
+    "\xef",
+    LENS,
+]
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.lists(st.tuples(st.integers(0, 10_000), st.sampled_from(SNIPPETS)), min_size=1, max_size=4)
+)
+def test_documents_spliced_anywhere_read_with_the_memo_as_alone(splices):
+    teacher = document(LENS, OTHER, REAL_FOCAL)
+    text = teacher.decode()
+    for position, snippet in splices:
+        position %= len(text) + 1
+        text = text[:position] + snippet + text[position:]
+    alone, with_memo = read_both([teacher, text.encode(), text.encode("latin-1", "replace")])
+    assert with_memo == alone
+
+
+def test_the_memo_is_used_where_it_can_be(monkeypatch):
+    pieces = read.Pieces()
+    read.read_bytes(document(LENS, OTHER), "a.xml", pieces=pieces)
+    learned: list[bytes] = []
+    real = read.Pieces._learn
+    monkeypatch.setattr(
+        read.Pieces,
+        "_learn",
+        lambda self, kind, piece, v: learned.append(piece) or real(self, kind, piece, v),
+    )
+    moved = read.read_bytes(document("\n" * 7, OTHER, LENS), "a.xml", pieces=pieces)
+    assert learned == []  # both lenses known, on other lines
+    assert [row[0] for row in moved.distortion] == [
+        row[0] for row in read.read_bytes(document("\n" * 7, OTHER, LENS), "a.xml").distortion
+    ]
+
+
+# ---------------------------------------------------------------------------
+# The solver's memo
+# ---------------------------------------------------------------------------
+
+floats = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, -0.0, 5e-324, -5e-324, 1e308, math.nan, 1.0, 0.5]),
+)
+
+
+def metric_text(columns: dict) -> str:
+    return repr(sorted(columns.items()))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.sampled_from(["ptlens", "poly3", "poly5"]), floats, floats, floats),
+        min_size=1,
+        max_size=6,
+    )
+)
+def test_the_solver_memo_answers_each_entry_as_solving_it_does(entries):
+    rows = []
+    for model, *coefficients in entries:
+        # Each entry again with its zeros of the other sign.
+        for a, b, c in (coefficients, [-v if v == 0 else v for v in coefficients]):
+            rows.append((1, "M", "L", (), "rectilinear", 1.5, 1.5, model, 10.0, 10.0,
+                         a, b, c, b, c, "ok", ""))  # fmt: skip
+    columns = row_columns(rows)
+    memo: dict = {}
+    first = metric_text(metric_columns(columns, memo))
+    again = metric_text(metric_columns(columns, memo))  # every entry from the memo now
+    assert first == again == metric_text(metric_columns(columns))
+
+
+def test_the_solver_memo_tells_zeros_apart():
+    pack = struct.Struct("<8d").pack
+    assert pack(0.0, *[1.0] * 7) != pack(-0.0, *[1.0] * 7)
