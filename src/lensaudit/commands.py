@@ -17,10 +17,11 @@ from contextlib import contextmanager
 from importlib import import_module
 from pathlib import Path
 
+from . import writing
 from .formats import writer
 from .pipeline import run as audit
 from .read import Cache, read
-from .read.paths import display_path
+from .read.paths import display_path, resolve
 from .read.records import LoadError
 
 # typing only for type checkers: a scan from the cache never imports it.
@@ -118,16 +119,33 @@ def os_error_message(error: OSError) -> str:
 
 @contextmanager
 def output_stream(path: Path | str | None) -> Iterator[TextIO]:
-    """Standard output, or ``path`` opened for writing (UTF-8)."""
-    if path is None or str(path) == "-":
-        yield sys.stdout
+    """Standard output, or a stream (UTF-8) whose content becomes ``path`` when
+    the block ends normally: an interrupted or failed command leaves the
+    file as it was (see :mod:`lensaudit.writing`)."""
+    try:
+        with writing.output_stream(path) as stream:
+            yield stream  # type: ignore[misc]
+    except writing.WriteError as error:
+        fail(str(error))
+
+
+def refuse_writing_inputs(
+    outputs: list[Path | str | None],
+    paths: tuple | list | None,
+    *others: Path | str,
+) -> None:
+    """Exit with status 2, before anything is read or written, when an output
+    would land on an input: the database at ``paths`` (the default database
+    without), or one of ``others``."""
+    if all(output is None or str(output) == "-" for output in outputs):
         return
     try:
-        stream = open(path, "w", encoding="utf-8", newline="")  # noqa: SIM115
-    except OSError as error:
-        fail(f"cannot write {path}: {error.strerror or error}")
-    with stream:
-        yield stream
+        database = resolve(list(paths or ()) or None).paths
+    except LoadError:
+        database = tuple(Path(p) for p in paths or ())
+    problem = writing.output_in_input(outputs, [*database, *others])
+    if problem is not None:
+        fail(f"{problem}: nothing read or written (an output never replaces an input)")
 
 
 def single_blas_thread() -> None:
@@ -145,6 +163,7 @@ def scan(arguments: ScanArguments) -> None:
     """Run ``lensaudit scan`` (see ``lensaudit scan --help``)."""
     paths = [Path(path) for path in arguments.paths]
     output = None if arguments.output is None else Path(arguments.output)
+    refuse_writing_inputs([output], paths)
     single_blas_thread()
     collecting = gc.isenabled()
     # What the scan allocates lives until it ends: the cycle collector would

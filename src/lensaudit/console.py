@@ -22,6 +22,7 @@ from .commands import (
     scan,
     scan_arguments,
 )
+from .writing import EXIT_INTERRUPTED, Interrupted, WriteError, catch_interrupts
 
 # typing only for type checkers
 TYPE_CHECKING = False
@@ -42,9 +43,6 @@ def _scan_directly(arguments: ScanArguments) -> int:
     except OSError as error:
         sys.stderr.write(os_error_message(error) + "\n")
         return EXIT_INPUT_ERROR
-    except KeyboardInterrupt:
-        sys.stderr.write("Aborted!\n")
-        return 1
     return 0
 
 
@@ -60,7 +58,19 @@ def _status(code: object) -> int:
 
 def dispatch(words: list[str]) -> int:
     """Run ``lensaudit WORDS...``, to its exit status: a plain scan here, the
-    rest through the click group."""
+    rest through the click group. Ctrl-C ends it with status 130 and
+    "interrupted" (nothing half-written is left: see :mod:`lensaudit.writing`)."""
+    try:
+        return _dispatch(words)
+    except (Interrupted, KeyboardInterrupt):
+        sys.stderr.write("lensaudit: interrupted\n")
+        return EXIT_INTERRUPTED
+    except WriteError as error:
+        sys.stderr.write(f"lensaudit: error: {error}\n")
+        return EXIT_INPUT_ERROR
+
+
+def _dispatch(words: list[str]) -> int:
     arguments = scan_arguments(words[1:]) if words[:1] == ["scan"] else None
     if arguments is not None:
         return _scan_directly(arguments)
@@ -82,6 +92,7 @@ def run() -> NoReturn:
     command's exit status. Anything but an exit (a crash) takes Python's
     usual way out.
     """
+    catch_interrupts()
     code = dispatch(sys.argv[1:])
     for stream in (sys.stdout, sys.stderr):
         try:

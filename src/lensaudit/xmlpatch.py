@@ -17,12 +17,12 @@ element is never taken for the real one.
 from __future__ import annotations
 
 import difflib
-import os
 import re
-import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from .writing import replace_files
 
 
 class PatchError(Exception):
@@ -239,44 +239,28 @@ def unified_diff(patch: FilePatch) -> str:
     return text
 
 
-def check_unchanged(patch: FilePatch) -> int:
+def check_unchanged(patch: FilePatch) -> None:
     """Raise :class:`PatchError` unless the file still holds what the patch was
-    computed from; return the file's permission bits."""
-    path = Path(patch.path)
+    computed from."""
     try:
-        current = path.read_bytes()
-        mode = path.stat().st_mode & 0o7777
+        current = Path(patch.path).read_bytes()
     except OSError as error:
         raise PatchError(f"{patch.name}: cannot read again: {error.strerror or error}") from None
     if current != patch.original:
         raise PatchError(f"{patch.name}: the file changed since it was read; nothing written")
-    return mode
 
 
-def write(patch: FilePatch) -> None:
-    """Write the patched content in place of the file, atomically.
+def write(patches: FilePatch | list[FilePatch]) -> None:
+    """Write patched contents in place of their files: all, or none.
 
-    The file is read again first: if it is no longer what the patch was
+    Every file is read again first: if one is no longer what its patch was
     computed from, nothing is written and :class:`PatchError` says so. The
-    new content goes to a temporary file in the same directory, which then
-    replaces the original (``os.replace``), so that a reader never sees half
-    a file; the original's permission bits are kept.
+    files are then replaced as :func:`lensaudit.writing.replace_files`
+    replaces them (atomically, keeping mode, owner and group, through
+    symbolic links; refusing a file this user may not write or one with
+    other hard links, with :class:`lensaudit.writing.WriteError`).
     """
-    path = Path(patch.path)
-    mode = check_unchanged(patch)
-    descriptor, temporary = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
-    )
-    try:
-        with os.fdopen(descriptor, "wb") as stream:
-            stream.write(patch.patched)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.chmod(temporary, mode)
-        os.replace(temporary, path)
-    except BaseException:
-        try:
-            os.unlink(temporary)
-        except OSError:
-            pass
-        raise
+    patches = [patches] if isinstance(patches, FilePatch) else patches
+    for patch in patches:
+        check_unchanged(patch)
+    replace_files([(patch.path, patch.patched) for patch in patches])

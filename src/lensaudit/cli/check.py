@@ -13,7 +13,14 @@ import click
 from ..check_formats import writer
 from ..git import GitError, GitUnavailable, top_level
 from ..read import LoadError
-from .options import cache_option, database_paths, fail, output_file, output_stream
+from .options import (
+    cache_option,
+    database_paths,
+    fail,
+    output_file,
+    output_stream,
+    refuse_writing_inputs,
+)
 
 if TYPE_CHECKING:
     from ..check import CheckResult
@@ -116,6 +123,8 @@ def check(
     """
     if not margin >= 1 or math.isinf(margin):
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
+    baselines = [baseline] if baseline is not None and os.path.exists(baseline) else []
+    refuse_writing_inputs([output], paths, *baselines)
     collecting = gc.isenabled()
     # What the check allocates lives until it ends: the cycle collector would
     # only walk it over and over.

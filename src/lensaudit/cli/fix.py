@@ -14,8 +14,9 @@ from ..formats.table import text_table
 from ..pipeline import run
 from ..read import LoadError
 from ..version import __version__
-from ..xmlpatch import PatchError, check_unchanged, unified_diff
-from ..xmlpatch import write as write_patch
+from ..writing import WriteError
+from ..xmlpatch import PatchError, unified_diff
+from ..xmlpatch import write as write_patches
 from .options import (
     cache_option,
     database_paths,
@@ -23,6 +24,7 @@ from .options import (
     format_option,
     output_file,
     output_stream,
+    refuse_writing_inputs,
 )
 
 if TYPE_CHECKING:
@@ -121,6 +123,7 @@ def fix(
     """
 
     _check_options(target, margin, tolerance)
+    refuse_writing_inputs([output], paths)
     audit = _read_audit(paths, cache, write)
     results, patches = _refit(audit, margin, target, tolerance, lens, focal)
     written = _write_patches(patches) if write else []
@@ -183,24 +186,13 @@ def _refit(
 
 
 def _write_patches(patches: list[FilePatch]) -> list[str]:
-    """Patch the files in place; the names of those written."""
-
-    written: list[str] = []
+    """Patch the files in place, all or none (see :func:`lensaudit.xmlpatch.write`);
+    the names of those written."""
     try:
-        # Every file is checked before any is written, so that a run
-        # refused for one changed file leaves all of them as they were.
-        for patch in patches:
-            check_unchanged(patch)
-        for patch in patches:
-            try:
-                write_patch(patch)
-            except OSError as error:
-                done = f" (written before it: {', '.join(written)})" if written else ""
-                fail(f"{patch.name}: cannot write: {error.strerror or error}{done}")
-            written.append(patch.name)
-    except PatchError as error:
+        write_patches(patches)
+    except (PatchError, WriteError) as error:
         fail(str(error))
-    return written
+    return [patch.name for patch in patches]
 
 
 def _check_options(target: float | None, margin: float, tolerance: float) -> None:

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import click
 
+from ..commands import refuse_writing_inputs
 from ..history import HistoryError, audit_history, trend_figure
 from ..history.index import caches, key_of
+from ..writing import OutputSet
 from .options import fail
 
 
@@ -95,6 +97,7 @@ def history(
 
     A progress bar is drawn when standard error is a terminal.
     """
+    refuse_writing_inputs([output_dir], [repository / db_path], repository / ".git")
     try:
         output_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -148,36 +151,28 @@ class _ProgressBar:
 
 
 def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
-    written = []
-    texts = {}
+    """Write history.csv, introduced.csv and the trend figures: all, or none."""
+    contents: dict[str, str | bytes] = {}
     for name, write in (
         ("history.csv", result.write_csv),
         ("introduced.csv", result.write_introduced_csv),
     ):
         stream = io.StringIO()
         write(stream)
-        texts[name] = stream.getvalue()
-        path = output_dir / name
-        try:
-            with open(path, "w", encoding="utf-8", newline="") as stream:
-                stream.write(texts[name])
-        except OSError as error:
-            fail(f"cannot write {path}: {error.strerror or error}")
-        written.append(path)
+        contents[name] = stream.getvalue()
     mode = "first-parent line" if result.first_parent else "all commits"
     title = (
         f"{result.path} of {result.repository.resolve().name} "
         f"({mode}) up to {result.newest.date[:10]}"
     )
-    figures = _figures(result, title, texts["history.csv"], cache)
-    for name, data in figures.items():
-        path = output_dir / name
-        try:
-            path.write_bytes(data)
-        except OSError as error:
-            fail(f"cannot write {path}: {error.strerror or error}")
-        written.append(path)
-    return written
+    contents |= _figures(result, title, contents["history.csv"], cache)  # type: ignore[arg-type]
+    with OutputSet() as outputs:
+        for name, data in contents.items():
+            if isinstance(data, str):
+                outputs.write_text(output_dir / name, data)
+            else:
+                outputs.write_bytes(output_dir / name, data)
+    return [output_dir / name for name in contents]
 
 
 def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[str, bytes]:

@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 # Shared with the click-free scan of the console command.
-from ..commands import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream
+from ..commands import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream, refuse_writing_inputs
 
 __all__ = [
     "EXIT_INPUT_ERROR",
@@ -20,6 +20,7 @@ __all__ = [
     "format_option",
     "output_file",
     "output_stream",
+    "refuse_writing_inputs",
 ]
 
 

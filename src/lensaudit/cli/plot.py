@@ -11,7 +11,8 @@ import click
 
 from ..pipeline import run
 from ..read import LoadError
-from .options import EXIT_INPUT_ERROR, cache_option, fail
+from ..writing import OutputSet
+from .options import EXIT_INPUT_ERROR, cache_option, fail, refuse_writing_inputs
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -62,6 +63,13 @@ def _check_format(output: Path) -> str:
     if fmt not in FIGURE_FORMATS:
         fail(f"cannot write {output}: give a .png, .svg or .pdf file name")
     return fmt
+
+
+def _check_output(output: Path, entry: str | None, databases: tuple[Path, ...]) -> None:
+    """Exit with status 2 for a figure format not known, or an output that is an input."""
+    _check_format(output)
+    named = (entry or "").rpartition(":")[0]
+    refuse_writing_inputs([output], databases, *([named] if named and Path(named).exists() else []))
 
 
 def _audit(paths: list[Path] | None, cache: bool) -> Audit:
@@ -117,7 +125,8 @@ def _save(figure: Any, output: Path) -> None:
     from ..report.figures import save  # matplotlib: --help stays quick
 
     try:
-        save(figure, output, _check_format(output))
+        with OutputSet() as outputs:
+            save(figure, outputs.path(output), _check_format(output))
     except OSError as error:
         fail(f"cannot write {output}: {error.strerror or error}")
     click.echo(f"Wrote {output}")
@@ -152,7 +161,7 @@ def curve(
     Radii in Hugin units (1 = half the short side of the calibration image).
     The model folds inside the image when D peaks (at r_max) below the corner.
     """
-    _check_format(output)
+    _check_output(output, entry, databases)
     audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
     from ..report import curves, figures, select  # numpy and matplotlib: --help stays quick
 
@@ -212,7 +221,7 @@ def warp(
     shows: outside the green circle (r = r_max) the model repeats image
     content, mirrored where D(r) < 0.
     """
-    _check_format(output)
+    _check_output(output, entry, databases)
     width, height = _size(size)
     if scale is not None and not (0 < scale <= 10 and math.isfinite(scale)):
         fail("--scale must be a number in (0, 10]")

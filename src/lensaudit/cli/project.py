@@ -20,7 +20,7 @@ from .. import read
 from ..formats.csv_format import write_rows
 from ..read import LoadError, display_path
 from ..read.records import STATUS_OK
-from .options import fail, output_file, output_stream
+from .options import fail, output_file, output_stream, refuse_writing_inputs
 
 if TYPE_CHECKING:
     import numpy as np
@@ -131,6 +131,8 @@ def project(
     ]
     if unused:
         fail(f"{', '.join(unused)} does not apply to {chosen[0]}")
+    given = [points] if points is not None and str(points) != "-" else []
+    refuse_writing_inputs([output], None if opencv else databases, *given)
     try:
         if opencv:
             camera = _opencv_camera(opencv, size)

@@ -8,7 +8,7 @@ import click
 
 from ..read import LoadError
 from ..report import ReportExistsError, audit, write_report
-from .options import cache_option, database_paths, fail
+from .options import cache_option, database_paths, fail, refuse_writing_inputs
 
 
 @click.command()
@@ -53,6 +53,7 @@ def report(
 
     Existing report files in DIR are replaced only with --force.
     """
+    refuse_writing_inputs([output_dir], paths)
     values = None
     if paper:
         # numpy: `report --help` imports no heavy module (tests/test_imports.py)

@@ -13,12 +13,12 @@ import io
 import json
 import math
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..formats import writer
 from ..version import __version__
+from ..writing import OutputSet
 from . import calibrations, provenance, tables
 
 if TYPE_CHECKING:
@@ -97,20 +97,6 @@ def folding_columns(audit: Audit) -> list[list[Any]]:
     return [[column[i] for i in folding] for column in map(audit.column, FOLDING_COLUMNS)]
 
 
-def _atomic(path: Path, write: Callable[[Path], None]) -> None:
-    temporary = path.with_name(f".{path.name}.tmp")
-    try:
-        write(temporary)
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
-
-
-def _write_text(path: Path, text: str) -> None:
-    _atomic(path, lambda p: p.write_text(text, encoding="utf-8", newline=""))
-
-
 def write_report(
     audits: ReportAudits,
     directory: str | os.PathLike[str],
@@ -145,34 +131,35 @@ def write_report(
         )
 
     written = []
-    for name, text in _data_files(audits, facts, table1, table2, fig5).items():
-        _write_text(directory / name, text)
-        written.append(directory / name)
+    # All files or none: each is written beside its name, all renamed at the end.
+    with OutputSet() as outputs:
+        for name, text in _data_files(audits, facts, table1, table2, fig5).items():
+            outputs.write_text(directory / name, text)
+            written.append(directory / name)
+        figure = figures.figure5(fig5)
+        png = directory / "fig5_r_normalized.png"
+        figures.save(figure, outputs.path(png), "png")
+        # Drawn once as SVG: the same text is the .svg file and the page's figure.
+        svg = figures.svg_text(figure)
+        outputs.write_text(directory / "fig5_r_normalized.svg", svg)
+        written += [png, directory / "fig5_r_normalized.svg"]
+        page = html.render(
+            audit,
+            facts,
+            fig5,
+            figures.inline_svg(svg, "fig5"),
+            table1,
+            table2,
+            comparison,
+            calibrations.section(audits.vignetting, audits.tca),
+        )
+        outputs.write_text(directory / "report.html", page)
+        written.append(directory / "report.html")
+        if comparison is not None:
+            from . import paper  # numpy: `report --help` (this package) imports no heavy module
 
-    figure = figures.figure5(fig5)
-    png = directory / "fig5_r_normalized.png"
-    _atomic(png, lambda p: figures.save(figure, p, "png"))
-    # Drawn once as SVG: the same text is the .svg file and the page's figure.
-    svg = figures.svg_text(figure)
-    _write_text(directory / "fig5_r_normalized.svg", svg)
-    written += [png, directory / "fig5_r_normalized.svg"]
-    page = html.render(
-        audit,
-        facts,
-        fig5,
-        figures.inline_svg(svg, "fig5"),
-        table1,
-        table2,
-        comparison,
-        calibrations.section(audits.vignetting, audits.tca),
-    )
-    _write_text(directory / "report.html", page)
-    written.append(directory / "report.html")
-    if comparison is not None:
-        from . import paper  # numpy: `report --help` (this package) imports no heavy module
-
-        _write_text(directory / PAPER_FILE, paper.markdown(comparison))
-        written.append(directory / PAPER_FILE)
+            outputs.write_text(directory / PAPER_FILE, paper.markdown(comparison))
+            written.append(directory / PAPER_FILE)
     return written
 
 
