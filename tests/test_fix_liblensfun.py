@@ -28,6 +28,8 @@ SHORT_SIDE = 4000  # pixels, about; adjusted so that the aspect ratio is exact
 SAMPLES = 600  # points along the half diagonal
 #: liblensfun computes in single precision: about 1e-7 of 4000 px per step.
 NOISE_PX = 0.01
+#: r_normalized below which `lensaudit check` warns, the margin fix reaches.
+CHECK_MARGIN = 1.1
 
 
 @pytest.fixture(scope="module")
@@ -53,8 +55,10 @@ def databases(bundled_db, tmp_path_factory):
     audit = run(str(original))
     flagged = {
         (e.file, e.line)
-        for e, folds in zip(audit.entries, audit.metrics.folds_in_image, strict=True)
-        if folds
+        for e, r_max, r_normalized in zip(
+            audit.entries, audit.metrics.r_max, audit.metrics.r_normalized, strict=True
+        )
+        if math.isfinite(r_max) and r_normalized < CHECK_MARGIN
     }
     return open_database(original), open_database(patched), results, flagged
 
@@ -69,14 +73,18 @@ def frame(aspect_ratio: float) -> tuple[int, int]:
     return int(short * ratio) + 1, short + 1
 
 
-def diagonal(lens, entry, reach: float = 1.0) -> tuple[np.ndarray, float]:
+def diagonal(
+    lens, entry, reach: float = 1.0, size: tuple[int, int] | None = None
+) -> tuple[np.ndarray, float]:
     """Where along the half diagonal its source pixels are read, and pixels per Hugin unit.
 
     Positions are signed distances from the centre along the diagonal: D(r),
     which a model that folds takes back through the centre. ``reach`` is how
-    far along the half diagonal to go (1: to the corner).
+    far along the half diagonal to go (1: to the corner). ``size``: the
+    image's width and height in pixels, by default a frame of the entry's
+    own aspect ratio.
     """
-    width, height = frame(entry.aspect_ratio)
+    width, height = size or frame(entry.aspect_ratio)
     modifier = lensfunpy.Modifier(lens, entry.crop_factor, width, height)
     modifier.initialize(
         entry.focal, lens.max_aperture or 2.8, scale=1.0, flags=lensfunpy.ModifyFlags.DISTORTION
@@ -98,7 +106,7 @@ def lens_of(lenses, entry):
     return lens
 
 
-def test_every_fold_of_the_bundled_database_was_refitted(databases):
+def test_every_fold_below_checks_margin_was_refitted(databases):
     _, _, results, flagged = databases
     assert {(r.entry.file, r.entry.line) for r in results} == flagged
     assert len(results) >= 4
@@ -119,13 +127,13 @@ def test_liblensfun_undistorts_monotonically_up_to_the_target_after_the_fix(data
         assert np.all(np.diff(radii) > 0), result.where
 
 
-def test_liblensfun_folds_before_the_image_radius_without_the_fix(databases):
+def test_liblensfun_folds_before_the_margin_without_the_fix(databases):
     original, _, results, _ = databases
     folded = 0
     for result in results:
-        radii, unit = diagonal(lens_of(original, result.entry), result.entry)
-        # The old model turns back before its source reaches the image's radius.
-        folded += bool(radii.max() < result.goal.r_corner * unit)
+        radii, unit = diagonal(lens_of(original, result.entry), result.entry, CHECK_MARGIN)
+        # The old model turns back before its source reaches margin x the image's radius.
+        folded += bool(radii.max() < CHECK_MARGIN * result.goal.r_corner * unit)
     assert folded == len(results)
 
 
@@ -139,8 +147,28 @@ def test_liblensfun_moves_pixels_by_no_more_than_the_reported_change(databases):
         within = min(1.0, result.goal.r_corner / corner)
         old, unit = diagonal(lens_of(original, entry), entry, within)
         new, _ = diagonal(lens_of(patched, entry), entry, within)
-        reported = result.max_change_px * unit / fix.PIXELS_PER_UNIT
+        # The frame's half diagonal is corner x unit pixels.
+        reported = result.max_change_half_diagonal * corner * unit
         difference = np.abs(new - old)
         assert difference.max() <= reported + NOISE_PX, result.where
         # ... and reaches it: the largest change lies on the diagonal, sampled finely.
         assert difference.max() >= 0.99 * reported - NOISE_PX, result.where
+
+
+def test_the_reported_change_is_liblensfuns_on_a_6000x4000_frame(databases):
+    """The change is reported in pixels of a 6000x4000 frame as liblensfun
+    applies the model to it, whatever the aspect ratio it was calibrated at
+    (liblensfun matches the diagonals): within 1% of what its Modifier moves
+    the pixels on the diagonal of such a frame (6001 x 4001 pixel centres)."""
+    original, patched, results, _ = databases
+    aspects = set()
+    for result in results:
+        entry = result.entry
+        corner = math.hypot(max(entry.aspect_ratio, 1 / entry.aspect_ratio), 1)
+        within = min(1.0, result.goal.r_corner / corner)
+        old, _ = diagonal(lens_of(original, entry), entry, within, (6001, 4001))
+        new, _ = diagonal(lens_of(patched, entry), entry, within, (6001, 4001))
+        largest = float(np.abs(new - old).max())
+        assert largest == pytest.approx(result.max_change_px, rel=0.01, abs=NOISE_PX), result.where
+        aspects.add(round(entry.aspect_ratio, 3))
+    assert {1.333, 1.5} <= aspects  # 4:3 calibrations among them, as the P30 Pro's

@@ -24,6 +24,12 @@ METRIC_COLUMNS = (
     "r_max", "d_max", "tail", "r_corner", "r_normalized", "r_corner_paper",
     "r_normalized_paper", "folds_in_image",
 )  # fmt: skip
+#: r_normalized below which a model folds too near its image: ``check`` warns
+#: (fold-near-image) below it, and ``fix`` refits a model to reach at least
+#: this many times the image radius before it folds. One constant, so that an
+#: entry ``fix`` fixes passes ``check`` with no fold finding at any severity.
+FOLD_MARGIN = 1.1
+
 #: Output columns, in order, for every format (CSV header, JSON keys, DataFrame).
 COLUMNS = (
     *LENS_COLUMNS, "real_focal", "a", "b", "c", "k1", "k2", *METRIC_COLUMNS, *STATUS_COLUMNS,

@@ -37,11 +37,19 @@ significant digits) and verified again, with one more digit where rounding
 broke them. For an infinite target, D' >= SLOPE_FLOOR is imposed on all of
 [0, inf) through the substitution r = s / (1 - s), s in [0, 1].
 
-Units. Radii are Hugin units (r = 1 is half the short side of the image).
-Changes of D are reported in pixels of a 6000 x 4000 frame, where that half
-short side is :data:`PIXELS_PER_UNIT` = 2000 px: the maximum over radii 0 to
-r_corner, and the root mean square over the image (its own frame, aspect x
-1, within r_corner).
+Slope. A model that only just increases stretches the image without bound
+when undistorted (by 1 / D'); the fixed model keeps D' >= :data:`SLOPE_FLOOR`
+from the centre to where D reaches the margin, checked exactly at the
+ends and where D'' is zero, and reports the smallest D' there.
+
+Units. Radii are Hugin units (r = 1 is half the short side of the image
+the model was calibrated on). Changes of D are reported as a fraction of
+the half diagonal, and in pixels of a 6000 x 4000 frame as liblensfun
+applies the model to it: it matches the diagonals of the calibration's
+frame and the image's, so a Hugin unit is 3606 / hypot(aspect, 1) px
+(:func:`pixels_per_unit`: 2000 px at 3:2, 2163 px at 4:3). The maximum is
+over radii 0 to r_corner, the root mean square over the image (its own
+frame, aspect x 1, within r_corner).
 """
 
 from __future__ import annotations
@@ -56,6 +64,7 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 
 from . import metrics, xmlpatch
+from .columns import FOLD_MARGIN
 from .pipeline import run
 from .read.paths import read_file
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
@@ -67,17 +76,20 @@ if TYPE_CHECKING:
     from .pipeline import Audit
     from .xmlpatch import FilePatch, StartTag
 
-#: Pixels per Hugin unit in the frame changes are reported in: half the short
-#: side of a 6000 x 4000 image.
-PIXELS_PER_UNIT = 2000.0
-#: Frame in which changes are reported, for messages and documentation.
+#: Frame in which changes are reported, for messages and documentation, and
+#: its half diagonal in pixels.
 FRAME = "6000x4000"
-DEFAULT_MARGIN = 1.0
+HALF_DIAGONAL_PX = math.hypot(3000.0, 2000.0)
+#: The r_normalized a fixed model reaches: check's margin (see FOLD_MARGIN).
+DEFAULT_MARGIN = FOLD_MARGIN
 DEFAULT_TOLERANCE_PX = 50.0
-#: Least slope D' the fit allows up to the target: far above the linear
-#: program's feasibility tolerance (1e-7), so that the verified model keeps
-#: a positive slope between grid points and after rounding.
-SLOPE_FLOOR = 1e-3
+#: Least slope D' a fixed model keeps from the centre to where D reaches the
+#: margin: undistorting stretches the image radially by 1 / D', so at most
+#: five times. The linear program asks for a little more
+#: (:data:`_FLOOR_SLACK`), so that the model keeps it between grid points
+#: and after rounding; the verification asks for this, exactly.
+SLOPE_FLOOR = 0.2
+_FLOOR_SLACK = 1.01
 #: D(T) must exceed the distorted radius to reach by this relative margin, so
 #: that rounding in the audit's own arithmetic cannot turn it back into a fold.
 REACH_SLACK = 1e-5
@@ -123,12 +135,23 @@ def _term_matrix(model: str) -> np.ndarray:
     return rows
 
 
+def pixels_per_unit(aspect_ratio: float) -> float:
+    """Pixels of the 6000x4000 frame per Hugin unit of a model calibrated at
+    ``aspect_ratio``, as liblensfun applies it: it matches the diagonal of
+    the calibration's frame (aspect x 1 Hugin units, corner hypot(aspect,
+    1)) to the image's, so 2000 px at 3:2 and 2163 px at 4:3."""
+    return HALF_DIAGONAL_PX / float(metrics.image_corner(aspect_ratio))
+
+
 @dataclass(frozen=True)
 class Change:
-    """How far a new model's D is from the old one's, in pixels of the reporting frame."""
+    """How far a new model's D is from the old one's: in pixels of the reporting
+    frame (scaled as liblensfun scales it, see :func:`pixels_per_unit`), and
+    the largest as a fraction of the half diagonal."""
 
     max_px: float
     rms_px: float
+    max_half_diagonal: float = 0.0
 
 
 def change_of_distortion(
@@ -138,7 +161,8 @@ def change_of_distortion(
     aspect_ratio: float,
     image_radius: float | None = None,
 ) -> Change:
-    """Maximum and RMS of |D_new - D_old| over the image, in pixels (6000x4000 frame).
+    """Maximum and RMS of |D_new - D_old| over the image, in pixels of the
+    6000x4000 frame as liblensfun scales the model to it (:func:`pixels_per_unit`).
 
     The image is the frame (aspect x 1 Hugin units) within ``image_radius``
     of its centre: by default the corner, hypot(aspect, 1), so the whole
@@ -153,7 +177,7 @@ def change_of_distortion(
     r_corner = math.hypot(aspect, 1.0)
     radius = r_corner if image_radius is None else min(image_radius, r_corner)
     if difference.size == 0:
-        return Change(0.0, 0.0)
+        return Change(0.0, 0.0, 0.0)
     radii = [0.0, radius]
     if difference.size > 2:
         roots = P.polyroots(P.polyder(difference))
@@ -172,7 +196,8 @@ def change_of_distortion(
         mean_square = float(np.einsum("i,j,ij->", weights, weights, squares) / 4)
     else:
         mean_square = _mean_square_within(difference, aspect, radius, nodes, weights)
-    return Change(largest * PIXELS_PER_UNIT, math.sqrt(mean_square) * PIXELS_PER_UNIT)
+    unit = pixels_per_unit(aspect_ratio)
+    return Change(largest * unit, math.sqrt(mean_square) * unit, largest / r_corner)
 
 
 def _mean_square_within(
@@ -245,19 +270,46 @@ def goal_for(
 
 @dataclass(frozen=True)
 class Verdict:
-    """The audit of one model: r_max, d_max, r_normalized, and whether it meets a goal."""
+    """The audit of one model: r_max, d_max, r_normalized, the smallest slope
+    D' from the centre to where D reaches the goal's distorted radius (NaN
+    if it folds first), and whether it meets the goal."""
 
     r_max: float
     d_max: float
     r_normalized: float
     meets_goal: bool
+    min_slope: float = math.nan
+
+
+def smallest_slope(model: str, coefficients: Sequence[float], reach: float, r_max: float) -> float:
+    """The smallest D'(r) for r from 0 to where D first reaches ``reach`` before
+    ``r_max`` (NaN if it does not): at the ends and where D'' is zero."""
+    curve = np.trim_zeros(distortion_polynomial(model, coefficients), "b")
+    crossings = [
+        root.real
+        for root in P.polyroots(P.polysub(curve, [reach]))
+        if abs(root.imag) <= 1e-9 * max(1.0, abs(root)) and 0 < root.real <= r_max
+    ]
+    if not crossings:
+        return math.nan
+    radius = min(crossings)
+    slope = P.polyder(curve)
+    points = [0.0, radius]
+    if slope.size > 2:
+        points += [
+            root.real
+            for root in P.polyroots(P.polyder(slope))
+            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < radius
+        ]
+    return float(np.min(P.polyval(np.array(points), slope)))
 
 
 def judge(model: str, coefficients: Sequence[float], goal: Goal) -> Verdict:
     """Audit coefficients with the same exact solver as ``lensaudit scan``.
 
-    The goal is met when r_max is beyond the target (or infinite) and
-    r_normalized is at least the margin.
+    The goal is met when r_max is beyond the target (or infinite),
+    r_normalized is at least the margin, and D' is at least
+    :data:`SLOPE_FLOOR` until D reaches the margin.
     """
     values = dict(zip(MODEL_COEFFICIENTS[model], coefficients, strict=True))
     a, b, c, k1, k2 = ([values.get(name, math.nan)] for name in ("a", "b", "c", "k1", "k2"))
@@ -267,7 +319,10 @@ def judge(model: str, coefficients: Sequence[float], goal: Goal) -> Verdict:
     d_max = float(result.d_max[0])
     r_normalized = d_max / goal.r_corner
     beyond = r_max > goal.target or math.isinf(r_max)
-    return Verdict(r_max, d_max, r_normalized, bool(beyond and r_normalized >= goal.margin))
+    reaches = bool(beyond and r_normalized >= goal.margin)
+    slope = smallest_slope(model, coefficients, goal.reach, r_max) if reaches else math.nan
+    meets = reaches and slope >= SLOPE_FLOOR
+    return Verdict(r_max, d_max, r_normalized, meets, slope)
 
 
 @dataclass(frozen=True)
@@ -309,7 +364,7 @@ class _Program:
             r = np.concatenate([np.linspace(0.0, radius, _GRID_POINTS), np.asarray(extra)])
             r = r[(r >= 0) & (r <= radius)]
             slope_rows = np.stack([P.polyval(r, row) for row in self.slope_terms], axis=1)
-            slope_limits = P.polyval(r, self.old_slope) - SLOPE_FLOOR
+            slope_limits = P.polyval(r, self.old_slope) - SLOPE_FLOOR * _FLOOR_SLACK
         # Variables: the change of each coefficient, then t. All rows "<=".
         ones = np.ones((self.image_rows.shape[0], 1))
         blocks = [
@@ -341,7 +396,7 @@ class _Program:
         """Rows of (1 - s)^k D'(s / (1 - s)) >= (1 - s)^k floor, per unit change."""
         degree = _SLOPE_DEGREE[self.model]
         rows = np.stack([_scaled(row, s, degree) for row in self.slope_terms], axis=1)
-        limits = _scaled(self.old_slope, s, degree) - SLOPE_FLOOR * (1 - s) ** degree
+        limits = _scaled(self.old_slope, s, degree) - SLOPE_FLOOR * _FLOOR_SLACK * (1 - s) ** degree
         return rows, limits
 
     def slope_minimum(self, coefficients: Sequence[float], radius: float) -> list[float]:
@@ -481,7 +536,10 @@ class FixResult:
     ``new_texts`` are the new values as they would be written. ``new`` is
     empty when no solution was found. r_max and r_normalized are in Hugin
     units and ratios, as in ``lensaudit scan``; the changes of D are in pixels
-    of a 6000x4000 frame (:data:`PIXELS_PER_UNIT` per Hugin unit).
+    of a 6000x4000 frame as liblensfun scales the model to it
+    (:func:`pixels_per_unit`), and the largest as a fraction of the half
+    diagonal; ``min_slope_after`` is the smallest D' of the new model from
+    the centre to where D reaches the margin.
     """
 
     entry: DistortionEntry
@@ -500,6 +558,8 @@ class FixResult:
     status: str
     message: str = ""
     index: int = field(default=-1, compare=False)
+    max_change_half_diagonal: float = math.nan
+    min_slope_after: float = math.nan
 
     @property
     def where(self) -> str:
@@ -537,6 +597,8 @@ class FixResult:
             target=self.goal.target,
             max_change_px=self.max_change_px,
             rms_change_px=self.rms_change_px,
+            max_change_half_diagonal=self.max_change_half_diagonal,
+            min_slope_after=self.min_slope_after,
             status=self.status,
             message=self.message,
         )
@@ -549,7 +611,8 @@ RECORD_COLUMNS = (
     "a_old", "b_old", "c_old", "k1_old", "k2_old",
     "a_new", "b_new", "c_new", "k1_new", "k2_new",
     "r_max_before", "r_max_after", "r_normalized_before", "r_normalized_after", "target",
-    "max_change_px", "rms_change_px", "status", "message",
+    "max_change_px", "rms_change_px", "max_change_half_diagonal", "min_slope_after",
+    "status", "message",
 )  # fmt: skip
 
 
@@ -609,7 +672,8 @@ def fix_entry(
             rms_change_px=math.nan,
             status=STATUS_NO_SOLUTION,
             message=f"no {entry.model} coefficients are increasing up to r = "
-            f"{goal.target:.4g} and reach {goal.reach:.4g} before folding",
+            f"{goal.target:.4g} and reach {goal.reach:.4g} before folding with "
+            f"D' >= {SLOPE_FLOOR:g}",
         )
     new_texts, new, after = _rounded_fit(entry.model, fit, old_texts, goal)
     change = change_of_distortion(entry.model, old, new, entry.aspect_ratio, goal.r_corner)
@@ -627,6 +691,8 @@ def fix_entry(
         rms_change_px=change.rms_px,
         status=status,
         message=message,
+        max_change_half_diagonal=change.max_half_diagonal,
+        min_slope_after=after.min_slope,
     )
 
 
@@ -658,7 +724,8 @@ def _beyond_tolerance(
 ) -> str:
     """Why a fit that changes D by more than ``tolerance`` pixels is not a fix."""
     message = (
-        f"the closest {entry.model} curve without the fold changes D by up to "
+        f"the closest {entry.model} curve without the fold (D' >= {SLOPE_FLOOR:g} until D "
+        f"reaches {goal.margin:g} x the image radius) changes D by up to "
         f"{change.max_px:.0f} px over the image, more than the {tolerance:g} px "
         f"tolerance ({FRAME} frame): the model folds at D = {before.d_max:.3g}, "
         f"{before.r_normalized:.0%} of the image radius {goal.r_corner:.3g}"
@@ -683,17 +750,23 @@ def select(
     lens: str | None = None,
     focal: float | None = None,
 ) -> list[int]:
-    """Indices of audited entries with r_normalized < margin, optionally filtered.
-
-    ``lens`` matches "maker lens" as a case-insensitive substring; ``focal``
-    the calibrated focal length in millimetres.
-    """
+    """Indices of audited entries with r_normalized < margin, optionally filtered
+    (see :func:`matching`)."""
     m = audit.metrics
     with np.errstate(invalid="ignore"):
         folding = audit.audited & np.isfinite(m.r_max) & (m.r_normalized < margin)
+    return matching(audit, np.flatnonzero(folding).tolist(), lens=lens, focal=focal)
+
+
+def matching(
+    audit: Audit, indices: Sequence[int], *, lens: str | None = None, focal: float | None = None
+) -> list[int]:
+    """Those of ``indices`` whose entry matches: ``lens`` "maker lens" as a
+    case-insensitive substring, ``focal`` the calibrated focal length in
+    millimetres."""
     chosen = []
     needle = lens.casefold() if lens else None
-    for index in np.flatnonzero(folding).tolist():
+    for index in indices:
         entry = audit.entries[index]
         if needle is not None and needle not in f"{entry.maker} {entry.lens}".casefold():
             continue

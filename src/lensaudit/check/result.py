@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
+from ..columns import FOLD_MARGIN
 from ..read.records import DEFAULT_LENS_TYPE, DistortionEntry, LoadError
 
 SEVERITY_ERROR = "error"
@@ -17,8 +18,9 @@ SEVERITY_WARNING = "warning"
 SEVERITY_NOTICE = "notice"
 SEVERITIES = (SEVERITY_ERROR, SEVERITY_WARNING, SEVERITY_NOTICE)
 
-#: r_normalized below which a fold just outside the image is a warning.
-DEFAULT_MARGIN = 1.1
+#: r_normalized below which a fold just outside the image is a warning (the
+#: margin ``fix`` refits to, :data:`lensaudit.columns.FOLD_MARGIN`).
+DEFAULT_MARGIN = FOLD_MARGIN
 
 
 FOLD_IN_IMAGE = "fold-in-image"

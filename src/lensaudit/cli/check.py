@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import click
 
 from ..check_formats import writer
+from ..columns import FOLD_MARGIN
 from ..git import GitError, GitUnavailable, top_level
 from ..read import LoadError
 from .options import (
@@ -44,7 +45,7 @@ EXIT_FINDINGS = 1
 @click.option(
     "--margin",
     type=float,
-    default=1.1,
+    default=FOLD_MARGIN,
     show_default=True,
     help="Warn about a fold outside the image when D(r_max) is less than "
     "MARGIN times the image corner.",

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
+from ..columns import FOLD_MARGIN
 from ..formats.csv_format import write_rows
 from ..formats.table import text_table
 from ..pipeline import run
@@ -57,7 +58,7 @@ if TYPE_CHECKING:
     "--margin",
     type=float,
     metavar="M",
-    default=1.0,
+    default=FOLD_MARGIN,
     show_default=True,
     help="Fix entries with r_normalized < M; the fixed model reaches M times "
     "the image radius before it folds.",
@@ -68,7 +69,8 @@ if TYPE_CHECKING:
     metavar="PX",
     default=50.0,
     show_default=True,
-    help="Largest change of D over the image, in pixels of a 6000x4000 frame, "
+    help="Largest change of D over the image, in pixels of a 6000x4000 frame "
+    "(as liblensfun scales the model to it), "
     "for an entry to count as fixed.",
 )
 @format_option("table: results and the diff; csv: one row per entry; json: both as data.")
@@ -93,21 +95,26 @@ def fix(
 ) -> None:
     """Refit distortion models that fold inside their image, so that they do not.
 
-    For every entry with r_normalized below the margin (by default the
-    entries `lensaudit scan` lists as folding inside their own image), find
-    the coefficients of the same model (ptlens a, b, c; poly3 k1; poly5 k1,
-    k2) whose D(r) stays closest to the original over the image and that
-    increase up to the target radius and reach margin x the image radius
-    before folding. The image radius is scan's: the frame's corner
-    hypot(aspect, 1), or a circular fisheye's image circle. The fit is a
+    For every entry with r_normalized below the margin (by default 1.1, the
+    margin below which `lensaudit check` warns: the entries that fold inside
+    their image or just outside it), find the coefficients of the same model
+    (ptlens a, b, c; poly3 k1; poly5 k1, k2) whose D(r) stays closest to the
+    original over the image and that increase up to the target radius and
+    reach margin x the image radius before folding, with a slope D' of at
+    least 0.2 on the way (undistortion stretches the image by 1 / D'). An
+    entry fixed passes `lensaudit check` with no fold finding. The image
+    radius is scan's: the frame's corner hypot(aspect, 1), or a circular
+    fisheye's image circle. The fit is a
     linear program (minimax over radii 0 to the image radius); the result is
     verified with the exact r_max solver, and the coefficients are rounded to
     the decimals the file uses (at least 5 significant digits).
 
-    Changes of D are in pixels of a 6000x4000 frame: Hugin r = 1, half the
-    short side, is 2000 px: the largest change over radii 0 to the image
-    radius, and the RMS over the image. An entry counts as fixed when the largest
-    change is within --tolerance; the others are reported with the reason.
+    Changes of D are in pixels of a 6000x4000 frame as liblensfun applies the
+    model to it, matching diagonals (Hugin r = 1 is 3606 px / hypot(aspect,
+    1): 2000 px for a 3:2 calibration, 2163 px for 4:3): the largest change
+    over radii 0 to the image radius, and the RMS over the image. An entry
+    counts as fixed when the largest change is within --tolerance; the others
+    are reported with the reason.
 
     PATH is a database directory or XML files; without PATH, the database
     bundled with lensfunpy is examined (and never written). Without --write,
@@ -173,6 +180,12 @@ def _refit(
     """The results for the selected entries, and the patches of the files that change."""
     from .. import fix as stage  # numpy: --help stays quick
 
+    audited = [i for i, entry in enumerate(audit.entries) if entry.status == "ok"]
+    if (lens or focal is not None) and not stage.matching(audit, audited, lens=lens, focal=focal):
+        wanted = [f"--lens {lens!r}" if lens else "", "" if focal is None else f"--focal {focal:g}"]
+        fail(
+            f"no audited entry of {audit.source.label} matches {' and '.join(filter(None, wanted))}"
+        )
     indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
     try:
         sources = stage.read_sources(audit, indices)
@@ -223,9 +236,9 @@ def _ratio(value: float) -> str:
 #: Columns of the table; each result takes two rows, its old and its new coefficients.
 _TABLE_COLUMNS = (
     "where", "lens", "focal", "model", "coefficients",
-    "r_max", "r_norm", "max px", "rms px", "status",
+    "r_max", "r_norm", "max px", "rms px", "min D'", "status",
 )  # fmt: skip
-_TABLE_RIGHT = [False, False, True, False, False, True, True, True, True, False]
+_TABLE_RIGHT = [False, False, True, False, False, True, True, True, True, True, False]
 
 
 def _write_table(
@@ -237,15 +250,21 @@ def _write_table(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from ..fix import FRAME, PIXELS_PER_UNIT  # numpy: --help stays quick
+    from ..fix import FRAME, SLOPE_FLOOR  # numpy: --help stays quick
 
     lines = _table_heading(audit, results, settings)
     if not results:
         stream.write("\n".join(lines) + "\n")
         return
     lines.append(
-        f"Changes of D in pixels of a {FRAME} frame ({PIXELS_PER_UNIT:g} px = half the "
-        "short side = Hugin r 1); maximum over radii 0 to the image radius, RMS over the image."
+        f"Changes of D in pixels of a {FRAME} frame as liblensfun applies the model to it "
+        "(diagonals matched: Hugin r 1 = 3606 px / hypot(aspect, 1), 2000 px at 3:2); "
+        "maximum over radii 0 to the image radius, RMS over the image."
+    )
+    lines.append(
+        f"min D': the smallest slope of the new D(r) up to where D reaches "
+        f"{settings['margin']:g} x the image radius (kept at least {SLOPE_FLOOR:g}: "
+        "undistortion stretches the image by 1 / D')."
     )
     lines.append("")
     lines += text_table(_TABLE_COLUMNS, _table_rows(results), right=_TABLE_RIGHT)
@@ -285,6 +304,7 @@ def _table_rows(results: list[FixResult]) -> list[list[str]]:
                 "",
                 "",
                 "",
+                "",
             ],
             [
                 "",
@@ -296,6 +316,7 @@ def _table_rows(results: list[FixResult]) -> list[list[str]]:
                 _ratio(r.r_normalized_after),
                 f"{r.max_change_px:.1f}" if r.new else "-",
                 f"{r.rms_change_px:.1f}" if r.new else "-",
+                _number(r.min_slope_after, 3) if r.new else "-",
                 r.status,
             ],
         )
@@ -351,7 +372,7 @@ def _write_json(
     written: list[str],
     stream: TextIO,
 ) -> None:
-    from ..fix import FRAME, PIXELS_PER_UNIT, RECORD_COLUMNS  # numpy: --help stays quick
+    from ..fix import FRAME, RECORD_COLUMNS  # numpy: --help stays quick
 
     entries = []
     for result in results:
@@ -369,7 +390,10 @@ def _write_json(
         "settings": {k: _json_value(v) for k, v in settings.items()},
         "units": {
             "radii": "Hugin units: 1 = half the short side of the image",
-            "changes": f"pixels of a {FRAME} frame ({PIXELS_PER_UNIT:g} px per Hugin unit)",
+            "changes": f"pixels of a {FRAME} frame as liblensfun applies the model to it "
+            "(diagonals matched: 3606 px / hypot(aspect, 1) per Hugin unit); "
+            "max_change_half_diagonal: the largest as a fraction of the half diagonal",
+            "min_slope_after": "smallest D' of the new model up to where D reaches the margin",
         },
         "entries": entries,
         "diff": diff,
