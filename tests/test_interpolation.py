@@ -1,0 +1,93 @@
+"""lensaudit.interpolation against liblensfun built from Lensfun master's
+source: the coefficients lf_lens_interpolate_distortion gives between
+calibrated focal lengths, for every model, with neighbours on one side or
+both, unsorted and repeated focal lengths, and outside the calibrated range."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from lensaudit.interpolation import interpolated, weights
+from liblensfun_master import interpolate_distortion, lenses, library
+
+NAMES = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "poly5": ("k1", "k2")}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def liblensfun():
+    """Lensfun master's liblensfun; skips the module where it cannot be built."""
+    return library()
+
+
+def lens_file(model: str, calibrations: list[tuple[float, tuple[float, ...]]]) -> bytes:
+    rows = "".join(
+        f'<distortion model="{model}" focal="{focal!r}" '
+        + " ".join(f'{n}="{v!r}"' for n, v in zip(NAMES[model], values, strict=True))
+        + "/>"
+        for focal, values in calibrations
+    )
+    return (
+        '<lensdatabase version="2"><lens><maker>M</maker><model>Zoom</model>'
+        "<mount>Test</mount><cropfactor>1.5</cropfactor>"
+        f"<calibration>{rows}</calibration></lens></lensdatabase>"
+    ).encode()
+
+
+def compare(model: str, calibrations: list[tuple[float, tuple[float, ...]]], focal: float):
+    (lens,) = lenses(lens_file(model, calibrations))
+    found = interpolate_distortion(lens, 1.5, focal)
+    assert found is not None and found[0] == model
+    ours = interpolated([values for _, values in calibrations], [f for f, _ in calibrations], focal)
+    scale = max(1e-3, *(abs(v) for _, values in calibrations for v in values))
+    # liblensfun computes in single precision.
+    assert found[1][: len(ours)] == pytest.approx(ours, abs=2e-6 * scale * 20), focal
+
+
+@pytest.mark.parametrize("model", sorted(NAMES))
+def test_a_zoom_is_interpolated_as_liblensfun_does(model):
+    count = len(NAMES[model])
+    calibrations = [
+        (10.0, tuple(0.01 * (i + 1) for i in range(count))),
+        (11.0, tuple(-0.02 * (i + 1) for i in range(count))),
+        (20.0, tuple(0.005 * (i + 2) for i in range(count))),
+        (35.0, tuple(-0.001 * (i + 3) for i in range(count))),
+    ]
+    for focal in (8.0, 10.0, 10.25, 10.62, 11.0, 12.5, 19.9, 27.0, 34.99, 35.0, 50.0):
+        compare(model, calibrations, focal)
+
+
+focal_lengths = st.floats(4, 200, allow_nan=False).map(lambda f: round(f, 2))
+coefficient = st.floats(-0.25, 0.25, allow_nan=False, width=32)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.lists(st.tuples(focal_lengths, st.tuples(coefficient, coefficient, coefficient)),
+             min_size=1, max_size=6),
+    focal_lengths,
+)  # fmt: skip
+def test_any_calibrations_in_any_order_are_interpolated_as_liblensfun_does(calibrations, focal):
+    compare("ptlens", calibrations, focal)
+
+
+def test_the_weights_of_a_calibrated_focal_length_are_its_own():
+    assert weights([20.0, 10.0, 10.0], 10.0) == [(1, 1.0)]
+    assert weights([], 10.0) == []
+    # Between two calibrations with no neighbour outside, the spline is a line of k x focal.
+    (low, w_low), (high, w_high) = weights([10.0, 20.0], 15.0)
+    assert (low, high) == (0, 1) and (w_low, w_high) == pytest.approx((1 / 3, 2 / 3))
+
+
+def test_repeated_focal_lengths_are_taken_in_liblensfuns_order():
+    calibrations = [
+        (20.0, (0.01, -0.02, 0.03)),
+        (10.0, (0.02, 0.01, -0.01)),
+        (15.0, (-0.01, 0.02, 0.01)),
+        (10.0, (0.05, -0.04, 0.02)),
+        (20.0, (-0.03, 0.01, 0.04)),
+        (30.0, (0.0, 0.01, -0.02)),
+    ]
+    for focal in (12.0, 17.5, 25.0):
+        compare("ptlens", calibrations, focal)
