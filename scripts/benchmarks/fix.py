@@ -42,7 +42,7 @@ def _wall_time(command: list[str]) -> float:
 
 
 def run(quick: bool) -> list[dict]:
-    from lensaudit import fix
+    from lensaudit import fix, refit
     from lensaudit.pipeline import run as audit_database
 
     repeats = 3 if quick else 9
@@ -82,13 +82,13 @@ def run(quick: bool) -> list[dict]:
     ]
 
     solved = [0]
-    solve = fix._Program.solve
+    solve = refit._Program.solve
 
     def counted(self, *args, **kwargs):
         solved[0] += 1
         return solve(self, *args, **kwargs)
 
-    fix._Program.solve = counted
+    refit._Program.solve = counted
     try:
         for result in results:
             entry_times = []
@@ -109,5 +109,5 @@ def run(quick: bool) -> list[dict]:
                 }
             )
     finally:
-        fix._Program.solve = solve
+        refit._Program.solve = solve
     return rows

@@ -61,14 +61,60 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.polynomial import polynomial as P
 
 from . import metrics, xmlpatch
-from .columns import FOLD_MARGIN
 from .pipeline import run
 from .read.paths import read_file
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
+from .refit import (
+    DEFAULT_MARGIN,
+    EXTRA_DIGITS,
+    FRAME,
+    SLOPE_FLOOR,
+    Change,
+    Fit,
+    Goal,
+    Verdict,
+    best_fit,
+    change_of_distortion,
+    decimals_of,
+    format_like,
+    goal_for,
+    judge,
+    pixels_per_unit,
+    rounded_texts,
+)
 from .xmlpatch import FilePatch, set_attributes
+
+__all__ = [
+    "DEFAULT_MARGIN",
+    "DEFAULT_TOLERANCE_PX",
+    "FRAME",
+    "SLOPE_FLOOR",
+    "STATUS_BEYOND_TOLERANCE",
+    "STATUS_FIXED",
+    "STATUS_NOT_LOCATED",
+    "STATUS_NO_SOLUTION",
+    "Change",
+    "FixResult",
+    "Goal",
+    "SourceTexts",
+    "Verdict",
+    "change_of_distortion",
+    "decimals_of",
+    "fix",
+    "fix_audit",
+    "fix_entry",
+    "format_like",
+    "goal_for",
+    "judge",
+    "matching",
+    "patches",
+    "pixels_per_unit",
+    "read_sources",
+    "select",
+    "to_dataframe",
+]
 
 if TYPE_CHECKING:
     import pandas
@@ -76,456 +122,11 @@ if TYPE_CHECKING:
     from .pipeline import Audit
     from .xmlpatch import FilePatch, StartTag
 
-#: Frame in which changes are reported, for messages and documentation, and
-#: its half diagonal in pixels.
-FRAME = "6000x4000"
-HALF_DIAGONAL_PX = math.hypot(3000.0, 2000.0)
-#: The r_normalized a fixed model reaches: check's margin (see FOLD_MARGIN).
-DEFAULT_MARGIN = FOLD_MARGIN
-DEFAULT_TOLERANCE_PX = 50.0
-#: Least slope D' a fixed model keeps from the centre to where D reaches the
-#: margin: undistorting stretches the image radially by 1 / D', so at most
-#: five times. The linear program asks for a little more
-#: (:data:`_FLOOR_SLACK`), so that the model keeps it between grid points
-#: and after rounding; the verification asks for this, exactly.
-SLOPE_FLOOR = 0.2
-_FLOOR_SLACK = 1.01
-#: D(T) must exceed the distorted radius to reach by this relative margin, so
-#: that rounding in the audit's own arithmetic cannot turn it back into a fold.
-REACH_SLACK = 1e-5
-#: Least number of significant digits a new coefficient is written with.
-MIN_SIGNIFICANT_DIGITS = 5
-
 STATUS_FIXED = "fixed"
 STATUS_BEYOND_TOLERANCE = "beyond_tolerance"
 STATUS_NO_SOLUTION = "no_solution"
 STATUS_NOT_LOCATED = "not_located"
-
-_GRID_POINTS = 161  # points of each grid of the linear program
-_SEARCH_POINTS = 9  # values of T tried before the bounded search
-_SEARCH_SPAN = 4.0  # T is searched in [target, _SEARCH_SPAN * target]
-_REFINEMENTS = 12  # rounds of grid refinement before giving up
-_EXTRA_DIGITS = 12  # digits added at most when rounding breaks a fix
-_GAUSS_POINTS = 48  # Gauss-Legendre nodes per axis for the RMS over the frame
-
-# D(r) = r + sum of coefficient x term(r); terms as polynomial coefficients, lowest power first.
-_TERMS: dict[str, tuple[tuple[float, ...], ...]] = {
-    "ptlens": ((0, -1, 0, 0, 1), (0, -1, 0, 1), (0, -1, 1)),
-    "poly3": ((0, -1, 0, 1),),
-    "poly5": ((0, 0, 0, 1), (0, 0, 0, 0, 0, 1)),
-}
-_IDENTITY = np.array([0.0, 1.0])
-#: Degree of D' in r, per model.
-_SLOPE_DEGREE = {model: max(map(len, terms)) - 2 for model, terms in _TERMS.items()}
-
-
-def distortion_polynomial(model: str, coefficients: Sequence[float]) -> np.ndarray:
-    """D(r) of a model as polynomial coefficients, lowest power first (Hugin units)."""
-    result = _IDENTITY.copy()
-    for value, term in zip(coefficients, _TERMS[model], strict=True):
-        result = P.polyadd(result, value * np.asarray(term, dtype=np.float64))
-    return result
-
-
-def _term_matrix(model: str) -> np.ndarray:
-    """One row per coefficient: its term of D, padded to degree 5."""
-    rows = np.zeros((len(_TERMS[model]), 6))
-    for index, term in enumerate(_TERMS[model]):
-        rows[index, : len(term)] = term
-    return rows
-
-
-def pixels_per_unit(aspect_ratio: float) -> float:
-    """Pixels of the 6000x4000 frame per Hugin unit of a model calibrated at
-    ``aspect_ratio``, as liblensfun applies it: it matches the diagonal of
-    the calibration's frame (aspect x 1 Hugin units, corner hypot(aspect,
-    1)) to the image's, so 2000 px at 3:2 and 2163 px at 4:3."""
-    return HALF_DIAGONAL_PX / float(metrics.image_corner(aspect_ratio))
-
-
-@dataclass(frozen=True)
-class Change:
-    """How far a new model's D is from the old one's: in pixels of the reporting
-    frame (scaled as liblensfun scales it, see :func:`pixels_per_unit`), and
-    the largest as a fraction of the half diagonal."""
-
-    max_px: float
-    rms_px: float
-    max_half_diagonal: float = 0.0
-
-
-def change_of_distortion(
-    model: str,
-    old: Sequence[float],
-    new: Sequence[float],
-    aspect_ratio: float,
-    image_radius: float | None = None,
-) -> Change:
-    """Maximum and RMS of |D_new - D_old| over the image, in pixels of the
-    6000x4000 frame as liblensfun scales the model to it (:func:`pixels_per_unit`).
-
-    The image is the frame (aspect x 1 Hugin units) within ``image_radius``
-    of its centre: by default the corner, hypot(aspect, 1), so the whole
-    frame; a smaller radius (a circular fisheye's image circle) leaves out
-    the rest. The maximum is over radii 0 to that radius, found exactly at
-    the end points and the real roots of the difference's derivative; the
-    RMS is over the image's area, every pixel alike.
-    """
-    difference = P.polysub(distortion_polynomial(model, new), distortion_polynomial(model, old))
-    difference = np.trim_zeros(difference, "b")
-    aspect = max(aspect_ratio, 1.0 / aspect_ratio)
-    r_corner = math.hypot(aspect, 1.0)
-    radius = r_corner if image_radius is None else min(image_radius, r_corner)
-    if difference.size == 0:
-        return Change(0.0, 0.0, 0.0)
-    radii = [0.0, radius]
-    if difference.size > 2:
-        roots = P.polyroots(P.polyder(difference))
-        radii += [
-            root.real
-            for root in roots
-            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < radius
-        ]
-    largest = float(np.max(np.abs(P.polyval(np.array(radii), difference))))
-    nodes, weights = np.polynomial.legendre.leggauss(_GAUSS_POINTS)
-    if radius >= r_corner:
-        # The whole frame: a tensor Gauss-Legendre rule over a quarter of it.
-        x = (nodes + 1) * aspect / 2
-        y = (nodes + 1) / 2
-        squares = P.polyval(np.hypot(x[:, None], y[None, :]), difference) ** 2
-        mean_square = float(np.einsum("i,j,ij->", weights, weights, squares) / 4)
-    else:
-        mean_square = _mean_square_within(difference, aspect, radius, nodes, weights)
-    unit = pixels_per_unit(aspect_ratio)
-    return Change(largest * unit, math.sqrt(mean_square) * unit, largest / r_corner)
-
-
-def _mean_square_within(
-    difference: np.ndarray, aspect: float, radius: float, nodes: np.ndarray, weights: np.ndarray
-) -> float:
-    """Mean of difference(r)^2 over the quarter frame [0, aspect] x [0, 1] within ``radius``.
-
-    In polar form: the integral of f(r)^2 r theta(r) dr, with theta(r) the
-    angle of the circle of radius r inside the quarter frame. theta has
-    square-root kinks where the circle leaves the frame's sides (r = 1, r =
-    aspect); each piece is integrated with r = low + (high - low) u^2, which
-    smooths them for the Gauss-Legendre rule.
-    """
-    u = (nodes + 1) / 2
-    edges = sorted({0.0, *(e for e in (1.0, aspect) if e < radius), radius})
-    total = area = 0.0
-    for low, high in zip(edges, edges[1:], strict=False):
-        r = low + (high - low) * u**2
-        jacobian = 2 * (high - low) * u * weights / 2
-        with np.errstate(invalid="ignore"):
-            theta = np.where(
-                r <= 1, math.pi / 2, np.arcsin(np.minimum(1.0, 1.0 / np.maximum(r, 1e-300)))
-            )
-            theta = theta - np.where(r > aspect, np.arccos(np.minimum(1.0, aspect / r)), 0.0)
-        weight = r * theta * jacobian
-        total += float(np.sum(P.polyval(r, difference) ** 2 * weight))
-        area += float(np.sum(weight))
-    return total / area
-
-
-@dataclass(frozen=True)
-class Goal:
-    """What a fixed model must do, in Hugin units.
-
-    ``target``: undistorted radius up to which D must be increasing (r_max
-    beyond it; ``inf`` for a model that never folds). ``reach``: distorted
-    radius D must attain before it folds (d_max >= reach). ``margin``: the
-    r_normalized = d_max / r_corner the fixed model must have at least.
-    ``aspect_ratio`` is the image's, and r_corner = hypot(aspect, 1).
-    """
-
-    aspect_ratio: float
-    r_corner: float
-    target: float
-    reach: float
-    margin: float
-
-
-def goal_for(
-    aspect_ratio: float,
-    margin: float = DEFAULT_MARGIN,
-    target: float | None = None,
-    image_radius: float | None = None,
-) -> Goal:
-    """The goal for an image of the given aspect ratio.
-
-    ``image_radius`` is the radius of the image the model must not fold
-    inside (Hugin units), by default its corner hypot(aspect, 1); the goal's
-    ``r_corner`` is that radius. The target defaults to that radius times
-    the margin, and is never below it.
-    """
-    if image_radius is None:
-        r_corner = float(metrics.image_corner(aspect_ratio))
-    else:
-        r_corner = float(image_radius)
-    if target is None:
-        target = r_corner * max(margin, 1.0)
-    return Goal(aspect_ratio, r_corner, float(target), r_corner * margin, margin)
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The audit of one model: r_max, d_max, r_normalized, the smallest slope
-    D' from the centre to where D reaches the goal's distorted radius (NaN
-    if it folds first), and whether it meets the goal."""
-
-    r_max: float
-    d_max: float
-    r_normalized: float
-    meets_goal: bool
-    min_slope: float = math.nan
-
-
-def smallest_slope(model: str, coefficients: Sequence[float], reach: float, r_max: float) -> float:
-    """The smallest D'(r) for r from 0 to where D first reaches ``reach`` before
-    ``r_max`` (NaN if it does not): at the ends and where D'' is zero."""
-    curve = np.trim_zeros(distortion_polynomial(model, coefficients), "b")
-    crossings = [
-        root.real
-        for root in P.polyroots(P.polysub(curve, [reach]))
-        if abs(root.imag) <= 1e-9 * max(1.0, abs(root)) and 0 < root.real <= r_max
-    ]
-    if not crossings:
-        return math.nan
-    radius = min(crossings)
-    slope = P.polyder(curve)
-    points = [0.0, radius]
-    if slope.size > 2:
-        points += [
-            root.real
-            for root in P.polyroots(P.polyder(slope))
-            if abs(root.imag) <= 1e-12 * max(1.0, abs(root)) and 0 < root.real < radius
-        ]
-    return float(np.min(P.polyval(np.array(points), slope)))
-
-
-def judge(model: str, coefficients: Sequence[float], goal: Goal) -> Verdict:
-    """Audit coefficients with the same exact solver as ``lensaudit scan``.
-
-    The goal is met when r_max is beyond the target (or infinite),
-    r_normalized is at least the margin, and D' is at least
-    :data:`SLOPE_FLOOR` until D reaches the margin.
-    """
-    values = dict(zip(MODEL_COEFFICIENTS[model], coefficients, strict=True))
-    a, b, c, k1, k2 = ([values.get(name, math.nan)] for name in ("a", "b", "c", "k1", "k2"))
-    # Crop factor and focal length only enter the paper's columns, unused here.
-    result = metrics.compute([model], a, b, c, k1, k2, [1.0], [goal.aspect_ratio], [1.0], [True])
-    r_max = float(result.r_max[0])
-    d_max = float(result.d_max[0])
-    r_normalized = d_max / goal.r_corner
-    beyond = r_max > goal.target or math.isinf(r_max)
-    reaches = bool(beyond and r_normalized >= goal.margin)
-    slope = smallest_slope(model, coefficients, goal.reach, r_max) if reaches else math.nan
-    meets = reaches and slope >= SLOPE_FLOOR
-    return Verdict(r_max, d_max, r_normalized, meets, slope)
-
-
-@dataclass(frozen=True)
-class Fit:
-    """Coefficients found by the linear program, before rounding."""
-
-    coefficients: tuple[float, ...]
-    radius: float  # the T used: increasing on [0, T], D(T) >= reach
-    deviation: float  # the program's objective, Hugin units, on its grid
-
-
-class _Program:
-    """The linear program of one entry, for any radius T (see the module docstring)."""
-
-    def __init__(self, model: str, coefficients: Sequence[float], goal: Goal) -> None:
-        self.model = model
-        self.old = np.asarray(coefficients, dtype=np.float64)
-        self.goal = goal
-        self.terms = _term_matrix(model)
-        self.slope_terms = np.array([P.polyder(row) for row in self.terms])
-        self.old_curve = distortion_polynomial(model, coefficients)
-        self.old_slope = P.polyder(self.old_curve)
-        image = np.linspace(0.0, goal.r_corner, _GRID_POINTS)[1:]  # D(0) = 0 always
-        self.image_rows = np.stack([P.polyval(image, row) for row in self.terms], axis=1)
-
-    def solve(self, radius: float, extra: Sequence[float] = ()) -> Fit | None:
-        """The closest coefficients increasing up to ``radius`` (may be inf), or None."""
-        from scipy.optimize import linprog  # scipy: only to refit a model
-
-        count = len(self.old)
-        if math.isinf(radius):
-            # D' >= floor on [0, inf): with r = s / (1 - s), (1 - s)^k D'(r) is a
-            # polynomial in s, positive on [0, 1]; its value at s = 1 is D''s
-            # leading coefficient. Rows divided by (1 + r)^k = (1 - s)^-k stay bounded.
-            s = np.concatenate([np.linspace(0.0, 1.0, _GRID_POINTS), np.asarray(extra)])
-            s = s[(s >= 0) & (s <= 1)]
-            slope_rows, slope_limits = self._scaled_slopes(s)
-        else:
-            r = np.concatenate([np.linspace(0.0, radius, _GRID_POINTS), np.asarray(extra)])
-            r = r[(r >= 0) & (r <= radius)]
-            slope_rows = np.stack([P.polyval(r, row) for row in self.slope_terms], axis=1)
-            slope_limits = P.polyval(r, self.old_slope) - SLOPE_FLOOR * _FLOOR_SLACK
-        # Variables: the change of each coefficient, then t. All rows "<=".
-        ones = np.ones((self.image_rows.shape[0], 1))
-        blocks = [
-            np.hstack([self.image_rows, -ones]),
-            np.hstack([-self.image_rows, -ones]),
-            np.hstack([-slope_rows, np.zeros((slope_rows.shape[0], 1))]),
-        ]
-        limits = [np.zeros(2 * len(ones)), slope_limits]
-        if math.isfinite(radius):
-            reach_row = np.array([P.polyval(radius, row) for row in self.terms] + [0.0])
-            blocks.append(-reach_row[None, :])
-            needed = self.goal.reach * (1 + REACH_SLACK)
-            limits.append(np.array([P.polyval(radius, self.old_curve) - needed]))
-        objective = np.zeros(count + 1)
-        objective[-1] = 1.0
-        solution = linprog(
-            objective,
-            A_ub=np.vstack(blocks),
-            b_ub=np.concatenate(limits),
-            bounds=[(None, None)] * count + [(0, None)],
-            method="highs",
-        )
-        if solution.status != 0:
-            return None
-        change = solution.x[:count]
-        return Fit(tuple((self.old + change).tolist()), radius, float(solution.x[-1]))
-
-    def _scaled_slopes(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rows of (1 - s)^k D'(s / (1 - s)) >= (1 - s)^k floor, per unit change."""
-        degree = _SLOPE_DEGREE[self.model]
-        rows = np.stack([_scaled(row, s, degree) for row in self.slope_terms], axis=1)
-        limits = _scaled(self.old_slope, s, degree) - SLOPE_FLOOR * _FLOOR_SLACK * (1 - s) ** degree
-        return rows, limits
-
-    def slope_minimum(self, coefficients: Sequence[float], radius: float) -> list[float]:
-        """Grid points to add: where the slope of these coefficients is smallest."""
-        slope = P.polyder(distortion_polynomial(self.model, coefficients))
-        if math.isinf(radius):
-            s = np.linspace(0.0, 1.0, 20 * _GRID_POINTS)
-            values = _scaled(slope, s, _SLOPE_DEGREE[self.model])
-        else:
-            s = np.linspace(0.0, radius, 20 * _GRID_POINTS)
-            values = P.polyval(s, slope)
-        low = int(np.argmin(values))
-        step = s[1] - s[0]
-        return [float(s[low]), float(max(s[low] - step / 2, 0)), float(s[low] + step / 2)]
-
-
-def _scaled(polynomial: np.ndarray, s: np.ndarray, degree: int) -> np.ndarray:
-    """(1 - s)^degree p(s / (1 - s)) = sum_j p_j s^j (1 - s)^(degree - j), at s in [0, 1]."""
-    polynomial = np.trim_zeros(np.asarray(polynomial, dtype=np.float64), "b")
-    if polynomial.size > degree + 1:
-        raise ValueError("polynomial of higher degree than the model's slope")
-    total = np.zeros_like(s)
-    for power, coefficient in enumerate(polynomial):
-        total = total + coefficient * s**power * (1 - s) ** (degree - power)
-    return total
-
-
-def best_fit(model: str, coefficients: Sequence[float], goal: Goal) -> Fit | None:
-    """The linear program's best coefficients over the radius T, verified exactly.
-
-    None when no coefficients of the model meet the goal (or the program
-    cannot find them within its refinements).
-    """
-    program = _Program(model, coefficients, goal)
-    if math.isinf(goal.target):
-        candidates = [math.inf]
-    else:
-        candidates = _search_radius(program, goal.target)
-    for radius in candidates:
-        extra: list[float] = []
-        for _ in range(_REFINEMENTS):
-            fit = program.solve(radius, extra)
-            if fit is None:
-                break
-            if judge(model, fit.coefficients, goal).meets_goal:
-                return fit
-            extra += program.slope_minimum(fit.coefficients, radius)
-    return None
-
-
-def _search_radius(program: _Program, target: float) -> list[float]:
-    """Radii T to try, best first: a coarse scan of [target, 4 target], then a bounded search."""
-    from scipy.optimize import minimize_scalar  # scipy: only to refit a model
-
-    radii = np.geomspace(target, _SEARCH_SPAN * target, _SEARCH_POINTS)
-
-    def deviation(radius: float) -> float:
-        fit = program.solve(radius)
-        return math.inf if fit is None else fit.deviation
-
-    values = [deviation(float(r)) for r in radii]
-    order = sorted(range(len(radii)), key=values.__getitem__)
-    best = order[0]
-    if not math.isfinite(values[best]):
-        return [float(radii[i]) for i in order[:3]]
-    low = float(radii[max(best - 1, 0)])
-    high = float(radii[min(best + 1, len(radii) - 1)])
-    refined = minimize_scalar(
-        deviation, bounds=(low, high), method="bounded", options={"xatol": 1e-3 * target}
-    )
-    found = [float(refined.x)] if refined.fun < values[best] else []
-    return found + [float(radii[i]) for i in order[:3]]
-
-
-def decimals_of(text: str) -> int:
-    """Digits after the decimal point of a number as written, exponent included.
-
-    ``"-0.024"`` has 3, ``"-8.6e-05"`` 6, ``"12"`` 0.
-    """
-    mantissa, _, exponent = text.strip().lower().partition("e")
-    fraction = mantissa.partition(".")[2]
-    try:
-        shift = int(exponent) if exponent else 0
-    except ValueError:
-        shift = 0
-    return max(0, len(fraction) - shift)
-
-
-def format_like(value: float, decimals: int, template: str) -> str:
-    """``value`` rounded to ``decimals`` places, written in the style of ``template``.
-
-    Plain decimals (``-0.020930``) unless the template uses an exponent
-    (``-8.6e-05``); then the same exponent letter, sign and zero padding.
-    Never ``-0``.
-    """
-    exponent_letter = next((ch for ch in template if ch in "eE"), None)
-    if exponent_letter is None or value == 0:
-        text = f"{value:.{max(decimals, 0)}f}"
-    else:
-        magnitude = math.floor(math.log10(abs(value)))
-        text = f"{value:.{max(decimals + magnitude, 0)}e}"
-        mantissa, _, exponent = text.partition("e")
-        power = int(exponent)
-        written = template.strip().lower().partition("e")[2]
-        digits = written.lstrip("+-")
-        width = len(digits) if digits.startswith("0") else 1
-        sign = "-" if power < 0 else ("+" if written.startswith("+") else "")
-        text = f"{mantissa}{exponent_letter}{sign}{abs(power):0{width}d}"
-    if text.startswith("-") and float(text) == 0:
-        text = text[1:]
-    return text
-
-
-def rounded_texts(
-    values: Sequence[float], templates: Sequence[str], extra_digits: int = 0
-) -> list[str]:
-    """New coefficient texts: the entry's decimals, at least 5 significant digits.
-
-    ``templates`` are the entry's coefficient texts as written in the file
-    (``"0"`` for a missing one); ``extra_digits`` adds decimal places.
-    """
-    decimals = max(decimals_of(t) for t in templates)
-    texts = []
-    for value, template in zip(values, templates, strict=True):
-        places = decimals
-        if value != 0:
-            places = max(places, MIN_SIGNIFICANT_DIGITS - 1 - math.floor(math.log10(abs(value))))
-        texts.append(format_like(value, places + extra_digits, template))
-    return texts
+DEFAULT_TOLERANCE_PX = 50.0
 
 
 @dataclass(frozen=True)
@@ -701,7 +302,7 @@ def _rounded_fit(
 ) -> tuple[list[str], tuple[float, ...], Verdict]:
     """(texts, coefficients, verdict) of the fit, rounded to the fewest extra digits
     that still meet the goal; unrounded if none do."""
-    for extra in range(_EXTRA_DIGITS + 1):
+    for extra in range(EXTRA_DIGITS + 1):
         new_texts = rounded_texts(fit.coefficients, old_texts, extra)
         new = tuple(float(t) for t in new_texts)
         after = judge(model, new, goal)
