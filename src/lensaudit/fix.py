@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import metrics, xmlpatch
+from . import metrics, xmlpatch, zooms
 from .pipeline import run
 from .read.paths import read_file
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
@@ -161,6 +161,12 @@ class FixResult:
     index: int = field(default=-1, compare=False)
     max_change_half_diagonal: float = math.nan
     min_slope_after: float = math.nan
+    #: The smallest r_normalized of the models liblensfun interpolates between
+    #: the lens's calibrations (every 0.01 mm), before and after, and where
+    #: after (NaN for a lens with one calibrated focal length).
+    r_normalized_between_before: float = math.nan
+    r_normalized_between_after: float = math.nan
+    focal_between_after: float = math.nan
 
     @property
     def where(self) -> str:
@@ -200,6 +206,9 @@ class FixResult:
             rms_change_px=self.rms_change_px,
             max_change_half_diagonal=self.max_change_half_diagonal,
             min_slope_after=self.min_slope_after,
+            r_normalized_between_before=self.r_normalized_between_before,
+            r_normalized_between_after=self.r_normalized_between_after,
+            focal_between_after=self.focal_between_after,
             status=self.status,
             message=self.message,
         )
@@ -213,6 +222,7 @@ RECORD_COLUMNS = (
     "a_new", "b_new", "c_new", "k1_new", "k2_new",
     "r_max_before", "r_max_after", "r_normalized_before", "r_normalized_after", "target",
     "max_change_px", "rms_change_px", "max_change_half_diagonal", "min_slope_after",
+    "r_normalized_between_before", "r_normalized_between_after", "focal_between_after",
     "status", "message",
 )  # fmt: skip
 
@@ -405,6 +415,12 @@ class SourceTexts:
     tags: dict[int, StartTag] = field(default_factory=dict)  # entry index -> tag
     problems: dict[int, str] = field(default_factory=dict)  # entry index -> why not found
 
+    def merge(self, other: SourceTexts) -> None:
+        """Add what ``other`` read (of other entries) to this."""
+        self.files.update(other.files)
+        self.tags.update(other.tags)
+        self.problems.update(other.problems)
+
     def texts(self, index: int) -> dict[str, str] | None:
         """The raw attribute values of an entry's ``<distortion>``, if found."""
         tag = self.tags.get(index)
@@ -452,7 +468,9 @@ def fix_audit(
     tolerance: float = DEFAULT_TOLERANCE_PX,
     sources: SourceTexts | None = None,
 ) -> list[FixResult]:
-    """:func:`fix_entry` for the given entries of an audit (see :func:`select`).
+    """:func:`fix_entry` for the given entries of an audit (see :func:`select`),
+    then each lens's calibrations judged together as liblensfun interpolates
+    them, and refitted together where that folds (:func:`fix_zooms`).
 
     With ``sources`` (:func:`read_sources`), the number format of each entry
     is taken from its file, and an entry whose element was not found there
@@ -469,11 +487,200 @@ def fix_audit(
             texts=texts,
             image_radius=float(audit.metrics.r_corner[index]),
         )
-        result = replace(result, index=index)
-        if sources is not None and index in sources.problems:
-            result = replace(result, status=STATUS_NOT_LOCATED, message=sources.problems[index])
-        results.append(result)
-    return results
+        results.append(_located(replace(result, index=index), sources))
+    return fix_zooms(audit, results, sources, margin=margin, target=target, tolerance=tolerance)
+
+
+def _located(result: FixResult, sources: SourceTexts | None) -> FixResult:
+    """The result, ``not_located`` where its element was not found in its file."""
+    if sources is not None and result.index in sources.problems:
+        return replace(result, status=STATUS_NOT_LOCATED, message=sources.problems[result.index])
+    return result
+
+
+def fix_zooms(
+    audit: Audit,
+    results: list[FixResult],
+    sources: SourceTexts | None,
+    *,
+    margin: float = DEFAULT_MARGIN,
+    target: float | None = None,
+    tolerance: float = DEFAULT_TOLERANCE_PX,
+) -> list[FixResult]:
+    """The results, each lens's judged over its focal range as liblensfun
+    interpolates it (:func:`lensaudit.zooms.sweep`). Where the entries fixed
+    one at a time leave an interpolated model below the margin, the
+    calibrations involved are refitted together
+    (:func:`lensaudit.zooms.refit_together`) and all of them are written,
+    or none; results are added for calibrations that move with them."""
+    by_index = {r.index: r for r in results}
+    found: dict[int, FixResult] = dict(by_index)
+    for calibrations in zooms.calibration_sets(audit):
+        if len(set(calibrations.focals)) < 2 or not by_index.keys() & set(calibrations.indices):
+            continue
+        lens = _ZoomLens(audit, calibrations, by_index, sources)
+        found.update(lens.judged(margin, target, tolerance))
+    return list(found.values())
+
+
+class _ZoomLens:
+    """One lens's distortion calibrations (:class:`lensaudit.zooms.CalibrationSet`),
+    with the results of those refitted one at a time (by position in the set)."""
+
+    def __init__(
+        self,
+        audit: Audit,
+        calibrations: zooms.CalibrationSet,
+        by_index: dict[int, FixResult],
+        sources: SourceTexts | None,
+    ) -> None:
+        self.audit = audit
+        self.sets = calibrations
+        self.sources = sources
+        self.old = [coefficients_of(audit.entries[i]) for i in calibrations.indices]
+        self.results = {p: by_index[i] for p, i in enumerate(calibrations.indices) if i in by_index}
+
+    def judged(self, margin: float, target: float | None, tolerance: float) -> dict[int, FixResult]:
+        """The lens's results, with the sweep of its focal range before and after;
+        refitted together where the one-at-a-time refits leave a fold between."""
+        before = zooms.sweep(self.sets, self.old)
+        current = [
+            self.results[p].new if p in self.results and self.results[p].fixed else old
+            for p, old in enumerate(self.old)
+        ]
+        after = zooms.sweep(self.sets, current)
+        # Refitted together only where each entry refitted alone is fixed: one that
+        # is not keeps its fold, at its own focal length and around it.
+        if after[0] >= margin or not all(r.fixed for r in self.results.values()):
+            return {
+                r.index: replace(
+                    r,
+                    r_normalized_between_before=before[0],
+                    r_normalized_between_after=after[0],
+                    focal_between_after=after[1],
+                )
+                for r in self.results.values()
+            }
+        goal = goal_for(self.sets.aspect_ratio, margin, target, self.sets.image_radius)
+        moving = {p for p, r in self.results.items() if r.new}
+        joint = None
+        for widened in (moving | zooms.neighbours(self.sets, after[1]), set(range(len(self.old)))):
+            joint = zooms.refit_together(self.sets, self.old, self._texts(widened), widened, goal)
+            if joint is not None:
+                moving = widened
+                break
+        if joint is None:
+            return self._unsolved(before, after, margin)
+        return self._together(joint, moving, goal, tolerance, before, after)
+
+    def _texts(self, positions: set[int]) -> list[tuple[str, ...]]:
+        """Each calibration's coefficients as written (as ``repr`` where not read)."""
+        extra = [self.sets.indices[p] for p in positions if p not in self.results]
+        if self.sources is not None and extra:
+            self.sources.merge(read_sources(self.audit, extra))
+        names = MODEL_COEFFICIENTS[self.sets.model]
+        found = []
+        for position, old in enumerate(self.old):
+            index = self.sets.indices[position]
+            raw = self.sources.texts(index) if self.sources is not None else None
+            raw = raw or {n: repr(v) for n, v in zip(names, old, strict=True)}
+            found.append(tuple(raw.get(n) or "0" for n in names))
+        return found
+
+    def _unsolved(
+        self, before: tuple[float, float], after: tuple[float, float], margin: float
+    ) -> dict[int, FixResult]:
+        """No coefficients keep the interpolation clear: nothing of the lens is written."""
+        message = (
+            f"refitted alone, liblensfun's interpolation of this lens would fold at "
+            f"{after[1]:g} mm (r_normalized {after[0]:.3f} < {margin:g}), and no "
+            f"coefficients of its calibrations refitted together avoid it"
+        )
+        return {
+            r.index: replace(
+                r,
+                status=STATUS_NO_SOLUTION if r.fixed else r.status,
+                message="; ".join(filter(None, [r.message, message])),
+                r_normalized_between_before=before[0],
+                r_normalized_between_after=math.nan,
+            )
+            for r in self.results.values()
+        }
+
+    def _together(
+        self,
+        joint: zooms.JointFit,
+        moving: set[int],
+        goal: Goal,
+        tolerance: float,
+        before: tuple[float, float],
+        after: tuple[float, float],
+    ) -> dict[int, FixResult]:
+        """Results for the calibrations refitted together: all written, or none."""
+        focals = ", ".join(f"{self.sets.focals[p]:g}" for p in sorted(moving))
+        note = (
+            f"refitted together with the calibrations at {focals} mm of this lens: refitted "
+            f"alone, liblensfun's interpolation would fold at {after[1]:g} mm "
+            f"(r_normalized {after[0]:.3f})"
+        )
+        found = {}
+        for position in sorted(moving):
+            if joint.texts[position] == self._texts(set())[position]:
+                continue  # left as it was
+            found[position] = self._member(position, joint, goal, tolerance, note, before)
+        if any(not r.fixed for r in found.values()):
+            blocked = ", ".join(r.where for r in found.values() if not r.fixed)
+            for position, r in found.items():
+                if r.fixed:
+                    found[position] = replace(
+                        r,
+                        status=STATUS_BEYOND_TOLERANCE,
+                        message=f"{r.message}; not written: {blocked} is not fixed, and the "
+                        "calibrations refitted together are written together or not at all",
+                    )
+        return {r.index: r for r in found.values()}
+
+    def _member(
+        self,
+        position: int,
+        joint: zooms.JointFit,
+        goal: Goal,
+        tolerance: float,
+        note: str,
+        before: tuple[float, float],
+    ) -> FixResult:
+        """The result of one calibration refitted with the others."""
+        index = self.sets.indices[position]
+        entry = self.audit.entries[index]
+        old, new = self.old[position], joint.coefficients[position]
+        change = change_of_distortion(entry.model, old, new, entry.aspect_ratio, goal.r_corner)
+        was, now = judge(entry.model, old, goal), judge(entry.model, new, goal)
+        fixed = change.max_px <= tolerance
+        message = note if fixed else f"{note}; it changes D by up to {change.max_px:.0f} px"
+        result = FixResult(
+            entry=entry,
+            names=MODEL_COEFFICIENTS[entry.model],
+            old=old,
+            old_texts=self._texts(set())[position],
+            new=new,
+            new_texts=joint.texts[position],
+            goal=goal,
+            r_max_before=was.r_max,
+            r_max_after=now.r_max,
+            r_normalized_before=was.r_normalized,
+            r_normalized_after=now.r_normalized,
+            max_change_px=change.max_px,
+            rms_change_px=change.rms_px,
+            status=STATUS_FIXED if fixed else STATUS_BEYOND_TOLERANCE,
+            message=message,
+            index=index,
+            max_change_half_diagonal=change.max_half_diagonal,
+            min_slope_after=now.min_slope,
+            r_normalized_between_before=before[0],
+            r_normalized_between_after=joint.r_normalized_between,
+            focal_between_after=joint.focal_between,
+        )
+        return _located(result, self.sources)
 
 
 def patches(results: Sequence[FixResult], sources: SourceTexts) -> list[FilePatch]:

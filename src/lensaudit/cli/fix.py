@@ -335,6 +335,19 @@ def _table_ending(
     if problems:
         lines.append("")
         lines += [f"{r.where}: {r.status}: {r.message}" for r in problems]
+    together = [r for r in results if r.fixed and r.message]
+    lines += [""] * bool(together) + [f"{r.where}: {r.message}" for r in together]
+    zooms = [r for r in results if r.fixed and not math.isnan(r.r_normalized_between_after)]
+    if zooms:
+        lines.append("")
+        lines.append(
+            "Zooms, as liblensfun interpolates between calibrated focal lengths (every 0.01 mm):"
+        )
+        lines += [
+            f"  {r.where}: smallest r_normalized {r.r_normalized_between_before:.3f} before, "
+            f"{r.r_normalized_between_after:.3f} after (at {r.focal_between_after:g} mm)"
+            for r in zooms
+        ]
     fixed = len(results) - len(problems)
     lines.append("")
     lines.append(
