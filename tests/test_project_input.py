@@ -202,6 +202,58 @@ def test_closed_stdin_is_refused():
     assert len(lines) == 1 and lines[0].startswith("lensaudit: error: <stdin>: "), lines
 
 
+def run_on_a_terminal(arguments: list[str], typed: bytes | None = None):
+    """`lensaudit project` in a subprocess whose standard input is a pseudo-terminal.
+
+    ``typed`` is written to the terminal as a user would type it; without it
+    nobody types, and a command that reads the terminal waits until the timeout.
+    """
+    pty = pytest.importorskip("pty")
+    master, slave = pty.openpty()
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "lensaudit", "project", *arguments, *PINHOLE],
+            stdin=slave,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        if typed is not None:
+            os.write(master, typed)
+        try:
+            stdout, stderr = process.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.communicate()
+            pytest.fail("lensaudit project waited for a terminal")
+    finally:
+        os.close(master)
+        os.close(slave)
+    return process.returncode, stdout.decode(), stderr.decode()
+
+
+def test_without_points_a_terminal_is_not_read_and_the_error_says_what_is_expected():
+    code, stdout, stderr = run_on_a_terminal([])
+    assert code == 2
+    assert stdout == ""
+    lines = stderr.splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("lensaudit: error: no POINTS: "), lines[0]
+    assert "CSV" in lines[0] and ".npy" in lines[0] and "pipe" in lines[0]
+
+
+def test_dash_reads_points_typed_on_a_terminal():
+    # One line, then Ctrl-D (end of file in the terminal's line mode).
+    code, stdout, stderr = run_on_a_terminal(["-"], typed=b"0.5,0.25,1\n\x04")
+    assert code == 0, stderr
+    assert pixels(stdout) == GOOD_PIXELS[:1]
+
+
+def test_info_reads_no_points_on_a_terminal():
+    code, stdout, stderr = run_on_a_terminal(["--info"])
+    assert code == 0, stderr
+    assert "r_max" in stdout
+
+
 # --- .npy arrays ---------------------------------------------------------------------------
 
 

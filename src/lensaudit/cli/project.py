@@ -91,8 +91,9 @@ def project(
 
     POINTS is a CSV file with columns x, y, z (a header row is optional; other
     columns are ignored), a .npy array N x 3, or - / nothing for standard
-    input (CSV, or .npy recognised by its header). Points are in the camera
-    frame (z forward, in front of the camera for z > 0).
+    input (CSV, or .npy recognised by its header). Without POINTS a terminal
+    is not read (exit 2): pipe the points in, or give - to type them. Points
+    are in the camera frame (z forward, in front of the camera for z > 0).
 
     The output is CSV with columns u, v, valid: the pixel in the recorded
     (distorted) image, and whether the point is in front of the camera and
@@ -131,6 +132,12 @@ def project(
     ]
     if unused:
         fail(f"{', '.join(unused)} does not apply to {chosen[0]}")
+    if points is None and not info and _stdin_is_terminal():
+        # Waiting for a terminal the user did not mean to type into looks like a hang.
+        fail(
+            "no POINTS: give a CSV or .npy file of x, y, z, pipe the points in, "
+            "or give - to type them"
+        )
     given = [points] if points is not None and str(points) != "-" else []
     refuse_writing_inputs([output], None if opencv else databases, *given)
     try:
@@ -313,6 +320,13 @@ def _read_points(path: Path | None) -> np.ndarray:
     if data.startswith(_ZIP_MAGIC):
         fail(f"{name}: a zip archive (.npz, .xlsx?); give CSV or a .npy array")
     return _parse_npy(data, name) if is_npy else _parse_csv(data, name)
+
+
+def _stdin_is_terminal() -> bool:
+    try:
+        return sys.stdin is not None and sys.stdin.isatty()
+    except (OSError, ValueError):  # closed: _read_stdin says so
+        return False
 
 
 def _read_stdin() -> bytes:
