@@ -61,6 +61,11 @@ PINHOLE_TYPES = frozenset({"rectilinear"})
 #: Points are projected in blocks of this many, so that the temporaries stay in cache.
 BLOCK = 1 << 14
 
+#: Between these, r**2 = x**2 + y**2 neither overflows nor loses digits to underflow;
+#: a camera whose r_max**2 is outside them has its r_max compared with the radius itself.
+_SQUARES_SMALL = 2.0**-1000
+_SQUARES_LARGE = 2.0**1000
+
 
 class ProjectionError(ValueError):
     """A model, image or entry that cannot be projected; the message says why."""
@@ -168,7 +173,8 @@ class RadialCamera:
     pixel is (cx + fx x F(r), cy + fy y F(r)), with F(r) = sum of
     ``distortion[j] * w**j``, w = r**power (power 1 or 2). ``r_max`` and
     ``d_max = r_max F(r_max)`` are in pinhole units. ``width`` and ``height``
-    are the image size in pixels when known.
+    are the image size in pixels when known. An r_max whose square is beyond
+    the float range (above about 1e154, a model near no distortion) is inf.
     """
 
     fx: float
@@ -411,7 +417,11 @@ def project(
 
     Returns ``(pixels, valid)``: pixels N x 2 (u, v) and a boolean mask,
     False for points behind or on the camera plane (Z <= 0), at or beyond
-    r_max, or not finite. Pixels of invalid points are NaN; with
+    r_max, or not finite (also where X/Z or Y/Z exceeds the float range);
+    any other point is valid, subnormal coordinates included. A valid point
+    so far off axis that its pixel exceeds the float range (|X/Z| about
+    1e150 and more, on a model that never folds) has an infinite or NaN
+    pixel. Pixels of invalid points are NaN; with
     ``nan_for_invalid=False`` they keep what the polynomial gives (the
     folded-back position), which is faster. Pixels are those of
     the image as the camera recorded it (distorted), in the camera's pixel
@@ -450,7 +460,17 @@ def _project_blocks(
     """
     count = points.shape[0]
     r_max_squared = camera.r_max * camera.r_max
-    coefficients = camera.distortion[::-1]
+    # Where r_max**2 is beyond the range in which x**2 + y**2 is exact to a rounding,
+    # the few points on that side of it are compared by their radius instead.
+    # Halved on the large side: the radius of a point whose x / z is near the
+    # largest float is itself beyond it.
+    if r_max_squared > _SQUARES_LARGE:
+        suspect, bound, half = np.greater, _SQUARES_LARGE, 0.5
+    elif r_max_squared < _SQUARES_SMALL:
+        suspect, bound, half = np.less, _SQUARES_SMALL, 1.0
+    else:
+        suspect = None
+    coefficients = _highest_first(camera)
     size = min(BLOCK, count)
     xyz = np.empty((3, size))
     w, f, scratch = (np.empty(size) for _ in range(3))
@@ -461,19 +481,26 @@ def _project_blocks(
             n = stop - start
             block_xyz = xyz[:, :n]
             np.copyto(block_xyz, points[start:stop].T)
-            x, y, inverse_z = block_xyz
+            x, y, z = block_xyz
             wb, fb, sb, bad = w[:n], f[:n], scratch[:n], invalid[:n]
-            np.divide(1.0, inverse_z, out=inverse_z)
-            x *= inverse_z
-            y *= inverse_z
+            # x / z, not x * (1 / z): 1 / z overflows for a subnormal z where x / z need not.
+            x /= z
+            y /= z
             np.multiply(x, x, out=wb)
             np.multiply(y, y, out=sb)
             wb += sb
             if check:
                 good = valid[start:stop]
                 np.less(wb, r_max_squared, out=good)
-                # 1/z > 0 is z > 0, except that z = +inf (not a point) fails it.
-                np.greater(inverse_z, 0.0, out=bad)
+                if suspect is not None:
+                    suspect(wb, bound, out=bad)
+                    rows = np.flatnonzero(bad)
+                    radius = np.hypot(x[rows] * half, y[rows] * half)
+                    good[rows] = radius < camera.r_max * half
+                np.greater(z, 0.0, out=bad)
+                good &= bad
+                # z = +inf is not a point, though x / z is a number there.
+                np.less(z, math.inf, out=bad)
                 good &= bad
             if camera.power == 1:
                 np.sqrt(wb, out=wb)
@@ -494,6 +521,17 @@ def _project_blocks(
                 coordinate *= focal
                 coordinate += centre
                 pixels[start:stop, column] = coordinate
+
+
+def _highest_first(camera: RadialCamera) -> tuple[float, ...]:
+    """F's coefficients for Horner, highest power first, without zero high powers.
+
+    A zero coefficient of a high power would turn an overflowed w = inf into
+    0 * inf = NaN where F itself is finite.
+    """
+    coefficients = camera.distortion[::-1]
+    first = next((i for i, value in enumerate(coefficients) if value), len(coefficients) - 1)
+    return coefficients[first:]
 
 
 def valid_region_mask(

@@ -1,0 +1,139 @@
+"""Which points `project` calls valid, on hostile values, against exact arithmetic.
+
+The documented rule: a point is invalid when it is behind or on the camera
+plane (Z <= 0), at or beyond r_max, or not finite (X/Z or Y/Z beyond the
+float range included), and valid otherwise. The reference here applies that
+rule to X/Z and Y/Z as exact fractions; pixels are held to the model
+F(r) = sum of distortion[j] * (r^2)^j evaluated exactly. Nothing here needs
+lensfunpy or OpenCV.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from hypothesis import assume, example, given, settings
+from hypothesis import strategies as st
+
+from lensaudit.projection import (
+    LensfunCalibration,
+    brown_conrady_camera,
+    lensfun_camera,
+    project,
+)
+
+LARGEST = sys.float_info.max
+
+#: Cameras from r_max = 1e-150 to inf, with r_max**2 overflowing binary64 (k1 = -1e-320).
+CAMERAS = {
+    "pinhole": brown_conrady_camera(1000, 1000, 959.5, 539.5),
+    "k1 -0.3": brown_conrady_camera(1000, 1000, 959.5, 539.5, -0.3),
+    "k1 k2 k3": brown_conrady_camera(800, 900, 640, 360, -0.35, 0.12, -0.02),
+    "k1 1e300": brown_conrady_camera(1000, 1000, 500, 500, 1e300),
+    "k1 -1e300": brown_conrady_camera(1000, 1000, 500, 500, -1e300),
+    "k1 -1e-320": brown_conrady_camera(1000, 1000, 500, 500, -1e-320),
+    "lensfun poly3": lensfun_camera(LensfunCalibration("poly3", 10.0, k1=-0.3), 6000, 4000),
+}
+
+hostile = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True),
+    st.sampled_from([0.0, -0.0, 5e-324, -5e-324, 1e-310, 2.2250738585072014e-308, LARGEST]),
+    st.floats(-10, 10),
+)
+
+
+def exact_ratio(numerator: float, denominator: float) -> Fraction | None:
+    """numerator / denominator exactly; None where it rounds beyond the float range."""
+    ratio = Fraction(numerator) / Fraction(denominator)
+    try:
+        float(ratio)
+    except OverflowError:
+        return None
+    return ratio
+
+
+def expected_valid(point: tuple[float, float, float], r_max: float) -> bool | None:
+    """The documented rule in exact arithmetic; None within a rounding of r_max."""
+    x, y, z = point
+    if not all(math.isfinite(v) for v in point) or z <= 0:
+        return False
+    ratios = exact_ratio(x, z), exact_ratio(y, z)
+    if None in ratios:
+        return False
+    if math.isinf(r_max):
+        return True
+    squared = ratios[0] ** 2 + ratios[1] ** 2
+    bound = Fraction(r_max) ** 2
+    if abs(squared - bound) <= bound * Fraction(1, 10**9):
+        return None
+    return squared < bound
+
+
+def expected_pixel(camera, point) -> tuple[Fraction, Fraction, Fraction]:
+    """(u, v, scale): the pixel of F(r) evaluated exactly, and a bound on its terms' size."""
+    x, y = (Fraction(v) / Fraction(point[2]) for v in point[:2])
+    assert camera.power == 2
+    w = x * x + y * y
+    terms = [Fraction(c) * w**j for j, c in enumerate(camera.distortion)]
+    factor = sum(terms)
+    size = sum(abs(t) for t in terms)
+    u = Fraction(camera.cx) + Fraction(camera.fx) * x * factor
+    v = Fraction(camera.cy) + Fraction(camera.fy) * y * factor
+    scale = abs(Fraction(camera.cx)) + abs(Fraction(camera.cy))
+    scale += (Fraction(camera.fx) * abs(x) + Fraction(camera.fy) * abs(y)) * size
+    return u, v, scale
+
+
+@pytest.mark.parametrize(
+    "point",
+    [(1.0, 1.0, 1.0), (1e-310, 1e-310, 1e-310), (0.0, 0.0, 5e-324), (5e-324, -5e-324, 5e-324)],
+)
+def test_subnormal_z_in_front_of_the_camera_is_valid_like_any_other(point):
+    camera = CAMERAS["pinhole"]
+    pixel, valid = project(point, camera)
+    assert valid
+    # x / z = y / z = 1 or 0 or +-1: by hand, u = 959.5 + 1000 x / z.
+    x, y = point[0] / point[2], point[1] / point[2]
+    assert pixel.tolist() == [959.5 + 1000 * x, 539.5 + 1000 * y]
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
+@settings(max_examples=300, deadline=None)
+@given(point=st.tuples(hostile, hostile, hostile))
+@example(point=(3.0, 3.0, 2.2250738585072014e-308))  # x/z finite, the radius not
+def test_validity_is_the_documented_rule_in_exact_arithmetic(name, point):
+    camera = CAMERAS[name]
+    expected = expected_valid(point, camera.r_max)
+    assume(expected is not None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pixels, valid = project([point], camera)
+    assert bool(valid[0]) is expected, (point, camera.r_max)
+    if not expected:
+        assert np.isnan(pixels[0]).all()
+        return
+    u, v, scale = expected_pixel(camera, point)
+    if scale > Fraction(10) ** 300 or max(abs(point[0]), abs(point[1])) >= 1e150 * point[2]:
+        return  # r^2 or the pixel is beyond the float range on the way (documented)
+    tolerance = scale * Fraction(1, 10**12) + Fraction(10) ** -300
+    assert abs(Fraction(float(pixels[0, 0])) - u) <= tolerance, (point, pixels[0])
+    assert abs(Fraction(float(pixels[0, 1])) - v) <= tolerance, (point, pixels[0])
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
+def test_blocks_of_hostile_points_agree_with_points_one_by_one(name):
+    camera = CAMERAS[name]
+    values = [0.0, -0.0, 5e-324, 1e-310, 1e-200, 0.5, 1.0, 3.0, 1e154, 1e200, LARGEST]
+    values += [-v for v in values] + [math.inf, -math.inf, math.nan]
+    rng = np.random.default_rng(23)
+    points = rng.choice(values, size=(5000, 3))
+    pixels, valid = project(points, camera)
+    for index in range(0, 5000, 97):
+        one_pixel, one_valid = project(points[index], camera)
+        assert one_valid == valid[index]
+        np.testing.assert_array_equal(one_pixel, pixels[index])
