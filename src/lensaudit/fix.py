@@ -196,25 +196,18 @@ class FixResult:
             row[f"{name}_old"] = old.get(name, math.nan)
         for name in ("a", "b", "c", "k1", "k2"):
             row[f"{name}_new"] = new.get(name, "")
-        row.update(
-            r_max_before=self.r_max_before,
-            r_max_after=self.r_max_after,
-            r_normalized_before=self.r_normalized_before,
-            r_normalized_after=self.r_normalized_after,
-            target=self.goal.target,
-            max_change_px=self.max_change_px,
-            rms_change_px=self.rms_change_px,
-            max_change_half_diagonal=self.max_change_half_diagonal,
-            min_slope_after=self.min_slope_after,
-            r_normalized_between_before=self.r_normalized_between_before,
-            r_normalized_between_after=self.r_normalized_between_after,
-            focal_between_after=self.focal_between_after,
-            status=self.status,
-            message=self.message,
-        )
+        row["target"] = self.goal.target
+        row.update((name, getattr(self, name)) for name in _RESULT_COLUMNS)
         return row
 
 
+#: The columns of :meth:`FixResult.record` that are fields of the result.
+_RESULT_COLUMNS = (
+    "r_max_before", "r_max_after", "r_normalized_before", "r_normalized_after",
+    "max_change_px", "rms_change_px", "max_change_half_diagonal", "min_slope_after",
+    "r_normalized_between_before", "r_normalized_between_after", "focal_between_after",
+    "status", "message",
+)  # fmt: skip
 #: Columns of :meth:`FixResult.record`, in order.
 RECORD_COLUMNS = (
     "file", "line", "maker", "lens", "focal", "crop_factor", "model",
