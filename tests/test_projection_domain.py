@@ -11,8 +11,10 @@ lensfunpy or OpenCV.
 from __future__ import annotations
 
 import math
+import subprocess
 import sys
 import warnings
+from decimal import Decimal, localcontext
 from fractions import Fraction
 
 import numpy as np
@@ -20,6 +22,7 @@ import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
+from conftest import lens_xml
 from lensaudit.projection import (
     LensfunCalibration,
     brown_conrady_camera,
@@ -29,14 +32,18 @@ from lensaudit.projection import (
 
 LARGEST = sys.float_info.max
 
-#: Cameras from r_max = 1e-150 to inf, with r_max**2 overflowing binary64 (k1 = -1e-320).
+#: Cameras from r_max = 0 to inf, with r_max**2 underflowing (k1 = -1.7e308) and
+#: overflowing (k1 = -1e-320) binary64 among them.
 CAMERAS = {
     "pinhole": brown_conrady_camera(1000, 1000, 959.5, 539.5),
     "k1 -0.3": brown_conrady_camera(1000, 1000, 959.5, 539.5, -0.3),
     "k1 k2 k3": brown_conrady_camera(800, 900, 640, 360, -0.35, 0.12, -0.02),
     "k1 1e300": brown_conrady_camera(1000, 1000, 500, 500, 1e300),
     "k1 -1e300": brown_conrady_camera(1000, 1000, 500, 500, -1e300),
+    "k1 -1.7e308": brown_conrady_camera(1000, 1000, 500, 500, -1.7e308),
+    "k3 -1.7e308": brown_conrady_camera(1000, 1000, 500, 500, 0, 0, -1.7e308),
     "k1 -1e-320": brown_conrady_camera(1000, 1000, 500, 500, -1e-320),
+    "decreasing": brown_conrady_camera(1000, 1000, 500, 500, 1e308, 0, -1e308),
     "lensfun poly3": lensfun_camera(LensfunCalibration("poly3", 10.0, k1=-0.3), 6000, 4000),
 }
 
@@ -137,3 +144,92 @@ def test_blocks_of_hostile_points_agree_with_points_one_by_one(name):
         one_pixel, one_valid = project(points[index], camera)
         assert one_valid == valid[index]
         np.testing.assert_array_equal(one_pixel, pixels[index])
+
+
+def test_r_max_of_a_k3_near_the_float_limit_is_the_root_of_its_cubic():
+    # D'(r) = 1 + 7 k3 r^6 = 0: r_max = (-1 / (7 k3)) ** (1/6), in 40 digits.
+    k3 = -1.7e308
+    with localcontext() as context:
+        context.prec = 40
+        r_max = (Decimal(-1) / (7 * Decimal(k3))) ** (Decimal(1) / 6)
+    camera = CAMERAS["k3 -1.7e308"]
+    assert camera.r_max == pytest.approx(float(r_max), rel=1e-12)
+    # d_max = D(r_max) = r_max (1 + k3 r_max^6) = r_max * 6 / 7.
+    assert camera.d_max == pytest.approx(float(r_max) * 6 / 7, rel=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    coefficients=st.lists(
+        st.one_of(
+            st.floats(allow_nan=False, allow_infinity=False),
+            st.sampled_from([1.7e308, -1.7e308, 1e-320, -1e-320, 0.0]),
+        ),
+        min_size=3,
+        max_size=3,
+    ),
+    model=st.sampled_from(["opencv", "ptlens", "poly3", "poly5"]),
+)
+def test_no_model_coefficients_make_numpy_warn(coefficients, model):
+    points = [[1, 1, 1], [1e-310, 1e-310, 1e-310], [1e300, -1e300, 1e-300], [0, 0, 5e-324]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        if model == "opencv":
+            camera = brown_conrady_camera(1000, 1000, 500, 500, *coefficients, 1000, 800)
+        else:
+            names = {"ptlens": "abc", "poly3": ["k1"], "poly5": ["k1", "k2"]}[model]
+            values = dict(zip(names, coefficients, strict=False))
+            try:
+                calibration = LensfunCalibration(model, 10.0, **values)
+                camera = lensfun_camera(calibration, 1000, 800)
+            except ValueError:  # ProjectionError: a model liblensfun cannot place either
+                return
+        project(points, camera)
+        camera.valid_region_mask(40, 30)
+        camera.undistortion_map(40, 30)
+    assert not math.isnan(camera.r_max)
+
+
+HUGE_OPENCV = [
+    "1000,1000,500,500,0,0,0,0,-1.7e308",
+    "1000,1000,500,500,1e308,1e308,0,0,-1e308",
+    "1000,1000,500,500,-1.7e308,1.7e308",
+    "1e-320,1e-320,-1.7e308,1.7e308,1e300,-1e300,0,0,1e-320",
+]
+
+
+@pytest.mark.parametrize("opencv", HUGE_OPENCV)
+@pytest.mark.parametrize("info", [False, True], ids=["points", "info"])
+def test_huge_opencv_coefficients_leave_standard_error_empty(tmp_path, opencv, info):
+    points = tmp_path / "points.csv"
+    points.write_text("x,y,z\n1,1,1\n1e-310,1e-310,1e-310\n1e300,1e300,1e-300\n0,0,5e-324\n")
+    arguments = ["--info"] if info else [str(points)]
+    completed = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "project", *arguments, "--opencv", opencv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stderr == ""
+    assert completed.stdout
+
+
+def test_a_lensfun_entry_near_the_float_limit_leaves_standard_error_empty(write_xml, tmp_path):
+    path = write_xml(lens_xml('<distortion model="poly5" focal="10" k1="1e308" k2="-1.7e308"/>'))
+    line = next(
+        number
+        for number, text in enumerate(path.read_text().splitlines(), start=1)
+        if "<distortion" in text
+    )
+    points = tmp_path / "points.csv"
+    points.write_text("0.001,0,1\n1,1,1\n")
+    completed = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "project", str(points)]
+        + ["--entry", f"{path}:{line}", "--size", "600x400"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stderr == ""

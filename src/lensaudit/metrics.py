@@ -79,10 +79,13 @@ def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArra
     return r_max, d_max, tail
 
 
-def _exact_distortion(
+def exact_distortion(
     model: str, a: float, b: float, c: float, k1: float, k2: float
 ) -> list[Fraction]:
-    """Coefficients of D(r) as written, highest power first, in exact arithmetic."""
+    """Coefficients of a Lensfun model's D(r) as written, highest power first, exactly.
+
+    ``model`` is "ptlens" (a, b, c used), "poly3" (k1) or "poly5" (k1, k2).
+    """
     from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
     if model == "ptlens":
@@ -101,8 +104,11 @@ def _nearest_double(x: Fraction) -> float:
         return math.inf if x > 0 else -math.inf
 
 
-def _exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, float, int]:
+def exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, float, int]:
     """(r_max, d_max, tail sign) of one model from its exact coefficients.
+
+    ``distortion`` holds D(r)'s coefficients, highest power first, as in
+    :attr:`normalizer.Cubic.distortion`; w = r**power in the cubic.
 
     For models whose cubic overflows binary64 (coefficients near 1e308):
     the cubic is formed exactly, scaled as w = 2^k v so that its coefficients
@@ -231,8 +237,8 @@ def compute(
             raw = [float(columns[n][row]) for n in ("a", "b", "c", "k1", "k2")]
             used = {"ptlens": raw[:3], "poly3": raw[3:4], "poly5": raw[3:]}[name]
             if all(math.isfinite(x) for x in used):
-                exact = _exact_distortion(name, *raw)
-                r_max[row], d_max[row], tail[row] = _exact_model_r_max(
+                exact = exact_distortion(name, *raw)
+                r_max[row], d_max[row], tail[row] = exact_model_r_max(
                     exact, 1 if name == "ptlens" else 2
                 )
     r_corner = np.where(audited, image_radius(aspect_ratio, circular), np.nan)

@@ -43,14 +43,20 @@ liblensfun's conventions, as measured through lensfunpy's ``Modifier``
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import normalizer
-from .metrics import HALF_DIAGONAL_MM, cubic_r_max
+from . import metrics, normalizer
+from .metrics import HALF_DIAGONAL_MM
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
+
+# Exact arithmetic is imported where it is needed: only models near 1e308 take that path.
+if TYPE_CHECKING:
+    from fractions import Fraction
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -129,12 +135,21 @@ class LensfunCalibration:
         )
 
     def cubic(self) -> normalizer.Cubic:
-        """The model in the normalizer's form (D(r) in Hugin units)."""
-        if self.model == "ptlens":
-            return normalizer.ptlens(self.a, self.b, self.c)
-        if self.model == "poly3":
-            return normalizer.poly3(self.k1)
-        return normalizer.poly5(self.k1, self.k2)
+        """The model in the normalizer's form (D(r) in Hugin units).
+
+        Coefficients near 1e308 overflow the cubic to +-inf; :attr:`r_max_hugin`
+        then takes the model's exact coefficients instead.
+        """
+        with np.errstate(over="ignore", invalid="ignore"):
+            if self.model == "ptlens":
+                return normalizer.ptlens(self.a, self.b, self.c)
+            if self.model == "poly3":
+                return normalizer.poly3(self.k1)
+            return normalizer.poly5(self.k1, self.k2)
+
+    def exact_distortion(self) -> list[Fraction]:
+        """D(r)'s coefficients, highest power first, in exact arithmetic."""
+        return metrics.exact_distortion(self.model, self.a, self.b, self.c, self.k1, self.k2)
 
     @property
     def hugin_correction(self) -> float:
@@ -162,7 +177,7 @@ class LensfunCalibration:
     @property
     def r_max_hugin(self) -> float:
         """r_max in Hugin units of the calibration sensor (0: no valid domain; inf: none needed)."""
-        return float(cubic_r_max(self.cubic()))
+        return _domain(self.cubic(), self.exact_distortion)[0]
 
 
 @dataclass(frozen=True)
@@ -227,6 +242,28 @@ class RadialCamera:
 LensLike = DistortionEntry | LensfunCalibration | RadialCamera
 
 
+def _domain(
+    cubic: normalizer.Cubic, exact_distortion: Callable[[], list[Fraction]]
+) -> tuple[float, float]:
+    """(r_max, d_max) of one model, in the units of its D(r).
+
+    In binary64, except where it overflows on the way (coefficients near
+    1e308): there from the model's exact coefficients, as the metrics do.
+    """
+    with np.errstate(all="ignore"):
+        r_max, d_max, _ = metrics.model_r_max(cubic)
+    r_max, d_max = float(r_max), float(d_max)
+    if math.isnan(r_max) or (math.isfinite(r_max) and not math.isfinite(d_max)):
+        r_max, d_max, _ = metrics.exact_model_r_max(exact_distortion(), cubic.power)
+    return r_max, d_max
+
+
+def _exact(values: list[float]) -> list[Fraction]:
+    from fractions import Fraction  # fractions: only for the exact path, rarely reached
+
+    return [Fraction(x) for x in values]
+
+
 def _polynomial_in_w(cubic: normalizer.Cubic) -> list[float]:
     """F(r) = D(r) / r as ascending coefficients in w = r**power."""
     descending = np.asarray(cubic.distortion, dtype=np.float64).reshape(-1)[:-1]
@@ -287,16 +324,14 @@ def lensfun_camera(
     )
     pixels_per_hugin = short / 2 / correction
     cubic = calibration.cubic()
-    r_max_hugin = float(cubic_r_max(cubic))
-    d_max_hugin = (
-        float(normalizer.evaluate(cubic.distortion, r_max_hugin))
-        if math.isfinite(r_max_hugin)
-        else math.inf
-    )
-    distortion = tuple(
-        value * hugin_per_pinhole ** (cubic.power * j)
-        for j, value in enumerate(_polynomial_in_w(cubic))
-    )
+    r_max_hugin, d_max_hugin = _domain(cubic, calibration.exact_distortion)
+    # F's coefficient of w**j in pinhole units: times hugin_per_pinhole**(power j),
+    # which may overflow; a zero coefficient stays zero rather than 0 * inf.
+    polynomial = _polynomial_in_w(cubic)
+    with np.errstate(over="ignore", under="ignore"):
+        scales = np.float64(hugin_per_pinhole) ** (cubic.power * np.arange(len(polynomial)))
+        pairs = zip(polynomial, scales, strict=True)
+        distortion = tuple(float(value * scale) if value else 0.0 for value, scale in pairs)
     focal_pixels = pixels_per_hugin * hugin_per_pinhole
     notes = ()
     if calibration.type not in PINHOLE_TYPES:
@@ -337,11 +372,9 @@ def brown_conrady_camera(
             raise ProjectionError(f"{name} is not a finite number")
     if not (fx > 0 and fy > 0):
         raise ProjectionError("fx and fy must be positive")
-    cubic = normalizer.brown_conrady(k1, k2, k3)
-    r_max = float(cubic_r_max(cubic))
-    d_max = (
-        float(normalizer.evaluate(cubic.distortion, r_max)) if math.isfinite(r_max) else math.inf
-    )
+    with np.errstate(over="ignore"):  # coefficients near 1e308: _domain's exact path
+        cubic = normalizer.brown_conrady(k1, k2, k3)
+    r_max, d_max = _domain(cubic, lambda: _exact(cubic.distortion.tolist()))
     if width is not None or height is not None:
         width, height = _check_size(width, height)
     return RadialCamera(
@@ -555,7 +588,8 @@ def valid_region_mask(
     camera = _as_camera(lens, width, height, crop_factor)
     width, height = _output_size(camera, width, height)
     x, y = _output_pinhole(camera, np.arange(width), np.arange(height), scale)
-    return (x * x)[np.newaxis, :] + (y * y)[:, np.newaxis] < camera.r_max * camera.r_max
+    with np.errstate(over="ignore"):  # far beyond any r_max: inf compares as it should
+        return (x * x)[np.newaxis, :] + (y * y)[:, np.newaxis] < camera.r_max * camera.r_max
 
 
 def undistortion_map(
@@ -600,17 +634,20 @@ def source_pixels(
     camera = _as_camera(lens, width, height, crop_factor)
     x, y = _output_pinhole(camera, xs, ys, scale)
     x, y = np.broadcast_arrays(x, y)
-    w = x * x + y * y
-    valid = w < camera.r_max * camera.r_max
-    if camera.power == 1:
-        w = np.sqrt(w)
-    factor = np.full_like(w, camera.distortion[-1])
-    for coefficient in camera.distortion[-2::-1]:
-        factor *= w
-        factor += coefficient
-    sources = np.empty((*w.shape, 2))
-    sources[..., 0] = camera.cx + camera.fx * x * factor
-    sources[..., 1] = camera.cy + camera.fy * y * factor
+    coefficients = _highest_first(camera)
+    # Far beyond r_max the folded map overflows to +-inf or NaN, as liblensfun's would.
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = x * x + y * y
+        valid = w < camera.r_max * camera.r_max
+        if camera.power == 1:
+            w = np.sqrt(w)
+        factor = np.full_like(w, coefficients[0])
+        for coefficient in coefficients[1:]:
+            factor *= w
+            factor += coefficient
+        sources = np.empty((*w.shape, 2))
+        sources[..., 0] = camera.cx + camera.fx * x * factor
+        sources[..., 1] = camera.cy + camera.fy * y * factor
     return sources, valid
 
 
@@ -653,6 +690,7 @@ def _output_pinhole(
     """Pinhole coordinates shown by output pixels (xs, ys) at ``scale``."""
     if not (math.isfinite(scale) and scale > 0):
         raise ProjectionError(f"scale {scale:g} is not positive")
-    x = (np.asarray(xs, dtype=np.float64) - camera.cx) / (camera.fx * scale)
-    y = (np.asarray(ys, dtype=np.float64) - camera.cy) / (camera.fy * scale)
+    with np.errstate(over="ignore"):  # a focal near 1e-308 px: +-inf, beyond any r_max
+        x = (np.asarray(xs, dtype=np.float64) - camera.cx) / (camera.fx * scale)
+        y = (np.asarray(ys, dtype=np.float64) - camera.cy) / (camera.fy * scale)
     return x, y
