@@ -12,6 +12,7 @@ import csv
 import io
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -728,6 +729,51 @@ def test_cli_summary_names_the_newest_revision(repo, tmp_path):
     assert "11 commits, 10 change the database" in result.output
     assert f"newest {repo.commits['c11'][:7]} 2020-01-11" in result.output
     assert "Auditing" not in result.output  # no progress bar off a terminal
+
+
+def distinct_file_versions(repo: Repository, *rev_list_args: str) -> int:
+    """The XML file versions (blobs) under data/db of the commits git selects."""
+    blobs = set()
+    for commit in repo.git("rev-list", *rev_list_args, "main").split():
+        for line in repo.git("ls-tree", "-r", commit, "--", "data/db").splitlines():
+            details, name = line.split("\t", 1)
+            if name.endswith(".xml"):
+                blobs.add(details.split()[2])
+    return len(blobs)
+
+
+VERSIONS_LINE = re.compile(r"^([\d,]+) file versions: ([\d,]+) read, ([\d,]+) from the last run;")
+
+
+@pytest.mark.parametrize(
+    "runs",
+    [
+        # Narrower after wider: the case that once printed parts above the whole.
+        [[], ["--until", "2020-01-05", "--first-parent"]],
+        [["--until", "2020-01-05", "--first-parent"], []],
+        [["--first-parent"], [], []],
+    ],
+    ids=["narrower", "wider", "same again"],
+)
+def test_cli_file_versions_read_and_from_the_last_run_add_up(repo, tmp_path, runs):
+    cache = tmp_path / "cache"
+    for number, args in enumerate(runs):
+        result = CliRunner().invoke(
+            main,
+            ["history", str(repo.path), "-o", str(tmp_path / str(number))]
+            + ["--cache", str(cache), *args],
+        )
+        assert result.exit_code == 0, result.output
+        found = [VERSIONS_LINE.match(line) for line in result.output.splitlines()]
+        [line] = [m for m in found if m]
+        total, read_now, reused = (int(group.replace(",", "")) for group in line.groups())
+        assert read_now + reused == total, line.group(0)
+        rev_list = [a.replace("2020-01-05", "2020-01-05 23:59:59") for a in args]
+        assert total == distinct_file_versions(repo, *rev_list)
+        if number == 0:
+            assert reused == 0  # a cold cache
+        if args == runs[number - 1] and number:
+            assert read_now == 0  # the same run again: all from the index
 
 
 @pytest.mark.parametrize(
