@@ -1,0 +1,213 @@
+"""Counts, file lists and output excerpts quoted in README.md, docs/report.md,
+docs/history.md and docs/ci.md, held to a live run: of the bundled database,
+or of the Lensfun history bundle (skipped without it). Timings are not held
+here: the docs quote them only from docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from lensaudit.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLE = ROOT.parent / "shared" / "data" / "lensfun-db-history.bundle"
+NUMBER_WORDS = {"two": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7}
+
+
+def doc(name: str) -> str:
+    return (ROOT / name).read_text(encoding="utf-8")
+
+
+def block_after(text: str, command: str) -> list[str]:
+    """The lines of the fenced block that follow ``$ command``, up to the next ``$`` or fence."""
+    start = text.index(f"$ {command}\n") + len(f"$ {command}\n")
+    lines = []
+    for line in text[start:].splitlines():
+        if line.startswith(("$ ", "```")):
+            break
+        lines.append(line)
+    return lines
+
+
+# --------------------------------------------------------------- README: scan
+
+
+@pytest.fixture(scope="module")
+def scan_output(bundled_db) -> list[str]:
+    result = CliRunner().invoke(main, ["scan"])
+    assert result.exit_code == 0, result.output
+    return result.output.splitlines()
+
+
+def test_readme_scan_excerpt_is_todays_output(scan_output):
+    quoted = block_after(doc("README.md"), "lensaudit scan")
+    # The first line names the installed database's path: only its start is quoted as is.
+    assert scan_output[0].startswith(quoted[0].split("(")[0])
+    assert quoted[1:] == scan_output[1:]
+
+
+def test_readme_prose_counts_the_folds_of_the_live_scan(scan_output):
+    line = next(x for x in scan_output if x.startswith("Entries that fold inside"))
+    folds = int(line.rsplit(":", 1)[1])
+    paper = int(re.search(r"(\d+) rectilinear entries would be flagged", "\n".join(scan_output))[1])
+    readme = doc("README.md")
+    word = re.search(r"\n(\w+) fold inside the very image", readme)[1].lower()
+    assert NUMBER_WORDS[word] == folds
+    units = re.search(r"\((\d+) rectilinear\s+entries against the paper's (\d+)\)", readme)
+    assert (int(units[1]), int(units[2])) == (folds, paper)
+
+
+# ------------------------------------------------------------ docs/report.md
+
+
+@pytest.fixture(scope="module")
+def report_runs(bundled_db, tmp_path_factory) -> tuple[str, str, list[str]]:
+    """(first run's output, second run's, the files written), run as the doc shows."""
+    out = tmp_path_factory.mktemp("report") / "out"
+    first = CliRunner().invoke(main, ["report", "-o", str(out)])
+    assert first.exit_code == 0, first.output
+    second = CliRunner().invoke(main, ["report", "-o", str(out)])
+    assert second.exit_code == 2
+    shown = [text.replace(str(out), "out") for text in (first.output, second.output.strip())]
+    return shown[0], shown[1], sorted(p.name for p in out.iterdir())
+
+
+def test_report_excerpt_is_todays_output(report_runs):
+    first, second, _ = report_runs
+    quoted = block_after(doc("docs/report.md"), "lensaudit report -o out")
+    assert quoted[:2] == first.splitlines()
+    text = doc("docs/report.md")
+    after = text.index("$ lensaudit report -o out", text.index("$ lensaudit report -o out") + 1)
+    assert text[after:].splitlines()[1] == second
+
+
+def test_report_counts_the_files_it_writes(report_runs):
+    first, second, written = report_runs
+    assert f"Wrote {len(written)} files" in first
+    listed = second.split("already holds ")[1].split(";")[0].split(", ")
+    assert sorted(listed) == written
+    table = doc("docs/report.md").split("What DIR receives:")[1].split("\n\n")[1]
+    named = set()
+    for cell in re.findall(r"^\| (.+?) \|", table, flags=re.M)[2:]:
+        for name in re.findall(r"`([^`]+)`", cell):
+            named.add(name)
+    # `.svg` beside fig5_r_normalized.png names fig5_r_normalized.svg.
+    expanded = {n if not n.startswith(".") else "fig5_r_normalized" + n for n in named}
+    assert set(written) <= expanded
+    assert expanded - set(written) == {"paper_comparison.md"}  # with --paper only
+
+
+# ----------------------------------------------------------- docs/history.md
+
+
+@pytest.fixture(scope="module")
+def lensfun_history_run(tmp_path_factory) -> tuple[list[str], Path]:
+    """`lensaudit history` of the Lensfun bundle's clone: (output lines, output directory)."""
+    if not BUNDLE.is_file():
+        pytest.skip(f"the Lensfun history bundle is not at {BUNDLE}")
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    base = tmp_path_factory.mktemp("lensfun-history")
+    clone = base / "lensfun-db"
+    subprocess.run(["git", "clone", "-q", str(BUNDLE), str(clone)], check=True, timeout=600)
+    out = base / "history-out"
+    result = CliRunner().invoke(main, ["history", str(clone), "-o", str(out), "--no-cache"])
+    assert result.exit_code == 0, result.output
+    return [line.replace(str(clone), "/tmp/lensfun-db") for line in result.output.splitlines()], out
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader(io.StringIO(path.read_text(encoding="utf-8"))))
+
+
+def test_history_excerpt_is_todays_output_but_the_time(lensfun_history_run):
+    lines, _ = lensfun_history_run
+    quoted = block_after(
+        doc("docs/history.md"), "lensaudit history /tmp/lensfun-db -o history-out --no-cache"
+    )
+    untimed = [re.sub(r"; [\d.]+ s$", "", line) for line in quoted[:3]]
+    assert untimed == [re.sub(r"; [\d.]+ s$", "", line) for line in lines[:3]]
+    assert re.match(r"wrote history-out/history\.csv, .*trend\.svg$", quoted[3])
+    commits = re.search(r"cloned \(([\d,]+) commits\)", doc("docs/history.md"))[1]
+    assert lines[0].split(": ")[1].startswith(f"{commits} commits")
+
+
+def test_history_csv_row_of_the_paper_snapshot_is_quoted_as_written(lensfun_history_run):
+    _, out = lensfun_history_run
+    text = doc("docs/history.md")
+    header, row = text.split("```\ncommit,date,")[1].split("```")[0].strip().splitlines()
+    live = (out / "history.csv").read_text(encoding="utf-8").splitlines()
+    assert live[0] == "commit,date," + header
+    assert row in live
+    counts = rows(out / "history.csv")[live.index(row) - 1]
+    quoted = re.search(r"(\d+) ptlens, (\d+)\s+poly3\s+and (\d+) poly5", text)
+    assert quoted.groups() == (counts["ptlens"], counts["poly3"], counts["poly5"])
+    finite = re.search(r"lensaudit finds\s+(\d+) in this revision", text)[1]
+    assert finite == counts["finite"]
+
+
+def test_history_per_revision_table_is_read_from_history_csv(lensfun_history_run):
+    _, out = lensfun_history_run
+    by_commit = {r["commit"][:7]: r for r in rows(out / "history.csv")}
+    table = doc("docs/history.md").split("| state at | commit |")[1].split("\n\n")[0]
+    quoted = re.findall(r"^\| ([\d-]+) \| (\w{7}) \| (.+) \|$", table, flags=re.M)
+    assert len(quoted) >= 5
+    for _, commit, cells in quoted:
+        live = by_commit[commit]
+        audited, finite, share, folds, paper = (c.strip() for c in cells.split("|"))
+        assert live["mainline"] == "true"
+        assert (audited, finite) == (live["audited"], live["finite"])
+        assert share == f"{100 * float(live['share_finite']):.1f}%"
+        assert folds == f"{live['folds_in_image']} / {live['folds_in_image_rectilinear']}"
+        assert paper == live["folds_in_image_paper_units_rectilinear"]
+
+
+def test_history_counts_the_commits_holding_a_broken_file(lensfun_history_run):
+    _, out = lensfun_history_run
+    broken = [r for r in rows(out / "history.csv") if int(r["files_with_errors"])]
+    word = re.search(r"(\S+) commits hold a file that is not well-formed", doc("docs/history.md"))
+    tens = {"Thirty": 30, "Twenty": 20, "Forty": 40}
+    first, _, second = word[1].partition("-")
+    assert tens[first] + (NUMBER_WORDS[second] if second else 0) == len(broken)
+    assert broken[0]["commit"][:7] in doc("docs/history.md")
+
+
+def test_history_table_of_todays_folds_is_introduced_csv(lensfun_history_run):
+    _, out = lensfun_history_run
+    folds = [r for r in rows(out / "introduced.csv") if r["folds_in_image"] == "true"]
+    text = doc("docs/history.md")
+    table = text.split("| file | lens | type | focal |")[1].split("\n\n")[0]
+    quoted = re.findall(r"^\| (\S+\.xml) \| (.+) \|$", table, flags=re.M)
+    assert len(quoted) == len(folds)
+    word = re.search(r"The (\w+) entries that fold inside their own image today", text)[1]
+    assert NUMBER_WORDS[word] == len(folds)
+    live = {
+        (r["file"], r["lens"]): (
+            r["type"],
+            f"{float(r['focal']):g}",
+            f"{float(r['r_normalized']):.3f}",
+            f"{float(r['r_normalized_paper']):.3f}",
+            r["commit"][:7],
+            r["date"][:10],
+            r["author"],
+        )
+        for r in folds
+    }
+    for file, cells in quoted:
+        lens, *values = (c.strip() for c in cells.split("|"))
+        assert tuple(values) == live[(file, lens)]
+
+
+def test_ci_md_counts_todays_folds(lensfun_history_run):
+    _, out = lensfun_history_run
+    folds = [r for r in rows(out / "introduced.csv") if r["folds_in_image"] == "true"]
+    quoted = re.search(r"brought all (\d+) entries that fold", doc("docs/ci.md"))
+    assert int(quoted[1]) == len(folds)
