@@ -110,28 +110,7 @@ def project(
     """
     from ..projection import ProjectionError  # numpy: --help stays quick
 
-    chosen = [
-        name
-        for name, value in (("--entry", entry), ("--lens", lens), ("--opencv", opencv))
-        if value
-    ]
-    if len(chosen) != 1:
-        fail(
-            "give exactly one of --entry, --lens (with --focal) or --opencv"
-            + (f", not {' and '.join(chosen)}" if chosen else "")
-        )
-    unused = [
-        name
-        for name, value, applies in (
-            ("--focal", focal, bool(lens)),
-            ("--db", databases, bool(lens)),
-            ("--crop", crop, not opencv),
-            ("--real-focal", real_focal, not opencv),
-        )
-        if value not in (None, ()) and not applies
-    ]
-    if unused:
-        fail(f"{', '.join(unused)} does not apply to {chosen[0]}")
+    _check_choice(entry, lens, opencv, focal, databases, crop, real_focal)
     if points is None and not info and _stdin_is_terminal():
         # Waiting for a terminal the user did not mean to type into looks like a hang.
         fail(
@@ -159,6 +138,40 @@ def project(
         fail(str(error))
     with output_stream(output) as stream:
         _write_pixels(pixels, valid, stream)
+
+
+def _check_choice(
+    entry: str | None,
+    lens: str | None,
+    opencv: str | None,
+    focal: float | None,
+    databases: tuple[Path, ...],
+    crop: float | None,
+    real_focal: float | None,
+) -> None:
+    """Exit with status 2 unless exactly one model is chosen and every option applies to it."""
+    chosen = [
+        name
+        for name, value in (("--entry", entry), ("--lens", lens), ("--opencv", opencv))
+        if value
+    ]
+    if len(chosen) != 1:
+        fail(
+            "give exactly one of --entry, --lens (with --focal) or --opencv"
+            + (f", not {' and '.join(chosen)}" if chosen else "")
+        )
+    unused = [
+        name
+        for name, value, applies in (
+            ("--focal", focal, bool(lens)),
+            ("--db", databases, bool(lens)),
+            ("--crop", crop, not opencv),
+            ("--real-focal", real_focal, not opencv),
+        )
+        if value not in (None, ()) and not applies
+    ]
+    if unused:
+        fail(f"{', '.join(unused)} does not apply to {chosen[0]}")
 
 
 def _size(text: str | None) -> tuple[int, int]:
