@@ -433,6 +433,7 @@ def test_bundled_database_counts_every_entry_and_has_no_input_errors(bundled_db)
         "duplicate-focal",
         "vignetting-zero-in-image",
         "vignetting-low-in-image",
+        "vignetting-brightens",
     }
 
 

@@ -99,6 +99,17 @@ def test_vignetting_below_a_tenth_inside_the_image_is_a_warning_that_passes(tmp_
     assert f"by {float(gain):.3g}" in result.findings[0].message
 
 
+def test_vignetting_brighter_than_the_centre_is_a_warning_that_passes(tmp_path):
+    # C(1) = 1 + 1/10 - 1/25 = 53/50 > 21/20; decreasing nowhere inside (C' > 0).
+    result = check(database(tmp_path, "db", xml(lens("Lens", vignetting("0.1", "-0.04")))))
+    assert found(result) == [("warning", "vignetting-brightens", LINE)]
+    assert not result.failed
+    assert "1.06 times as bright as its centre" in result.findings[0].message
+    # Just below the threshold at the corner: C(1) = 1 + 9/100 - 1/25 = 105/100, not above.
+    result = check(database(tmp_path, "db2", xml(lens("Lens", vignetting("0.09", "-0.04")))))
+    assert found(result) == []
+
+
 def test_vignetting_that_turns_inside_the_image_is_a_notice_only_when_verbose(tmp_path):
     path = database(tmp_path, "db", xml(lens("Lens", TURNING)))
     assert found(check(path)) == []

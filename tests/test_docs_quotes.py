@@ -211,3 +211,35 @@ def test_ci_md_counts_todays_folds(lensfun_history_run):
     folds = [r for r in rows(out / "introduced.csv") if r["folds_in_image"] == "true"]
     quoted = re.search(r"brought all (\d+) entries that fold", doc("docs/ci.md"))
     assert int(quoted[1]) == len(folds)
+
+
+# --------------------------------------------------------- docs/vignetting.md
+
+
+def brightening(database: Path | None) -> tuple[int, int, str, float]:
+    """(entries, lenses, brightest lens, its C) of `scan --kind vignetting` brightening."""
+    words = ["scan", "--no-cache", "--kind", "vignetting", "-f", "csv"]
+    output = CliRunner().invoke(main, [*words, *([str(database)] if database else [])]).output
+    rows = [r for r in csv.DictReader(io.StringIO(output)) if r["brightens"] == "true"]
+    top = max(rows, key=lambda r: float(r["c_max"]))
+    return len(rows), len({(r["maker"], r["lens"]) for r in rows}), top["lens"], float(top["c_max"])
+
+
+def test_the_brightening_counts_of_docs_vignetting_md_are_todays(bundled_db, lensfun_head):
+    text = doc("docs/vignetting.md")
+    bundled, head = brightening(bundled_db), brightening(lensfun_head)
+    row = re.search(r"\| C > 1\.05 inside the image[^|]*\| ([\d,]+) \| ([\d,]+) \|", text)
+    assert row and (int(row[1].replace(",", "")), int(row[2].replace(",", ""))) == (
+        bundled[0],
+        head[0],
+    )
+    sentence = re.search(
+        r"Brighter than the centre: (\d+) entries of (\d+) lenses in the bundled database,\s+"
+        r"(\d+) entries of (\d+) lenses at the head\. The brightest is the Sony (.+?) at",
+        text,
+        re.DOTALL,
+    )
+    assert sentence
+    assert tuple(map(int, sentence.groups()[:4])) == (*bundled[:2], *head[:2])
+    assert " ".join(sentence[5].split()) == bundled[2] == head[2]
+    assert f"{bundled[3]:.2f} times as bright" in " ".join(text.split())

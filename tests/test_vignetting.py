@@ -75,6 +75,7 @@ def reference(k1: str, k2: str, k3: str, w_image: str = "1", roots: bool = True)
     c = sympy.Poly(1 + q1 * W + q2 * W**2 + q3 * W**3, W)
     derivative = c.diff(W)
     shifted = sympy.Poly(c.as_expr() - sympy.Rational(1, 10), W)
+    raised = sympy.Poly(c.as_expr() - sympy.Rational(21, 20), W)
     with mpmath.workdps(1300):
         m1, m2, m3, w_max = (mpmath.mpf(q.p) / q.q for q in (q1, q2, q3, limit))
         points = [mpmath.mpf(0), w_max]
@@ -86,15 +87,22 @@ def reference(k1: str, k2: str, k3: str, w_image: str = "1", roots: bool = True)
             points.append(-m1 / (2 * m2))
         values = [(1 + x * (m1 + x * (m2 + x * m3)), x) for x in points if 0 <= x <= w_max]
         c_min, w_min = min(values)
-        c_min, w_min = float(c_min), float(w_min)
+        c_max, w_max = max(values)
+        c_min, w_min, c_max, w_max = float(c_min), float(w_min), float(c_max), float(w_max)
     result = {
         "c_min": c_min,
         "r_min": math.sqrt(w_min),
+        "c_max": c_max,
+        "r_cmax": math.sqrt(w_max),
         # C(0) = 1 > 0: C <= 0 somewhere in [0, W] exactly when C has a root in (0, W].
         "zero_in_image": c.count_roots(0, limit) > 0,
         # C < 1/10 somewhere exactly when C(W) < 1/10 or C - 1/10 changes sign in (0, W).
         "low_in_image": c.eval(limit) < sympy.Rational(1, 10)
         or roots_inside(odd_part(shifted), 0, limit) > 0,
+        # C(0) = 1: C > 21/20 somewhere exactly when C(W) > 21/20 or C - 21/20
+        # changes sign in (0, W).
+        "brightens": c.eval(limit) > sympy.Rational(21, 20)
+        or roots_inside(odd_part(raised), 0, limit) > 0,
         "monotone": derivative.is_zero or roots_inside(odd_part(derivative), 0, limit) == 0,
         "size": float(1 + abs(q1) * limit + abs(q2) * limit**2 + abs(q3) * limit**3),
     }
@@ -117,9 +125,10 @@ def assert_matches(k1: str, k2: str, k3: str, r_corner: float = 1.0) -> None:
     got = computed(k1, k2, k3, r_corner)
     want = reference(k1, k2, k3, repr(r_corner * r_corner))
     where = f"k = {k1}, {k2}, {k3}"
-    for flag in ("zero_in_image", "low_in_image", "monotone"):
+    for flag in ("zero_in_image", "low_in_image", "brightens", "monotone"):
         assert bool(got[flag]) == want[flag], f"{flag}: {where}"
     assert got["c_min"] == pytest.approx(want["c_min"], rel=1e-12, abs=1e-12 * want["size"]), where
+    assert got["c_max"] == pytest.approx(want["c_max"], rel=1e-12, abs=1e-12 * want["size"]), where
     assert got["r_min"] == pytest.approx(want["r_min"], rel=1e-6, abs=1e-6) or got[
         "c_min"
     ] == pytest.approx(want["c_min"], rel=1e-15), where
@@ -348,6 +357,26 @@ def test_a_zero_placed_exactly_at_the_corner_is_always_found(a, b):
 
 @settings(max_examples=60, deadline=None)
 @given(small_integers, small_integers)
+@example(0, 0)
+def test_c_placed_exactly_at_the_brightening_threshold_at_the_corner_is_decided_exactly(a, b):
+    # C(1) = 1 + k1 + k2 + k3 = 1.05 exactly in decimal: not above it there.
+    k2, k3 = Decimal(a) / 10_000, Decimal(b) / 10_000
+    k1 = Decimal("0.05") - k2 - k3
+    assert_matches(str(k1), str(k2), str(k3))
+
+
+def test_the_fe_85_gm_entry_lensfun_removed_brightens_its_corners_3_4_fold():
+    # Removed in Lensfun's 5599955b: k1=0.026, k2=1.27, k3=1.13.
+    got = computed("0.026", "1.27", "1.13")
+    assert got["brightens"] and got["severity"] == "warning"
+    assert got["c_max"] == pytest.approx(3.426, rel=1e-15) and got["r_cmax"] == 1
+    (finding,) = vignetting.findings([{**dict.fromkeys(vignetting.COLUMNS, ""), **got,
+                                       "file": "f.xml", "line": 3, "status": "ok"}])  # fmt: skip
+    assert finding[1] == vignetting.BRIGHTENS and "3.43 times as bright" in finding[4]
+
+
+@settings(max_examples=60, deadline=None)
+@given(small_integers, small_integers)
 def test_a_turning_point_placed_exactly_at_the_corner_is_decided_as_sympy_does(b, c):
     # C'(1) = k1 + 2 k2 + 3 k3 = 0 exactly in decimal.
     k2, k3 = Decimal(b) / 10_000, Decimal(c) / 10_000
@@ -367,7 +396,7 @@ def test_any_finite_doubles_give_exact_flags_and_no_warning(k1, k2, k3):
         warnings.simplefilter("error")
         got = computed(repr(k1), repr(k2), repr(k3))
     want = reference(repr(k1), repr(k2), repr(k3), roots=False)
-    for flag in ("zero_in_image", "low_in_image", "monotone"):
+    for flag in ("zero_in_image", "low_in_image", "brightens", "monotone"):
         assert bool(got[flag]) == want[flag], flag
     if math.isfinite(want["c_min"]):
         assert got["c_min"] == pytest.approx(want["c_min"], rel=1e-9, abs=1e-12 * want["size"])
@@ -388,6 +417,7 @@ def independent_flags(entries: list, w_image: np.ndarray, points: int = 2001) ->
     texts = [(repr(e.k1), repr(e.k2), repr(e.k3)) for e in entries]
     zero = np.zeros(len(entries), dtype=bool)
     low = np.zeros(len(entries), dtype=bool)
+    bright = np.zeros(len(entries), dtype=bool)
     turns = np.zeros(len(entries), dtype=bool)
     doubtful = np.zeros(len(entries), dtype=bool)
     fraction = np.linspace(0.0, 1.0, points)
@@ -403,9 +433,12 @@ def independent_flags(entries: list, w_image: np.ndarray, points: int = 2001) ->
         rounding = 1e-12 * (1 + np.abs(k1) + np.abs(k2) + np.abs(k3))[:, 0]
         c_min = c.min(axis=1)
         band = curvature * h**2 / 8 + rounding
+        c_max = c.max(axis=1)
         zero[block] = c_min <= 0
         low[block] = c_min < 0.1
+        bright[block] = c_max > 1.05
         doubtful[block] |= (np.abs(c_min) <= band) | (np.abs(c_min - 0.1) <= band)
+        doubtful[block] |= np.abs(c_max - 1.05) <= band
         # A sign change between two samples whose signs rounding cannot flip is
         # certain; without one, C' may still change sign twice between samples
         # (or at an end) only where it comes within max|C''| h of zero.
@@ -416,8 +449,9 @@ def independent_flags(entries: list, w_image: np.ndarray, points: int = 2001) ->
     for index in np.flatnonzero(doubtful):
         want = reference(*texts[index], repr(float(w_image[index])))
         zero[index], low[index] = want["zero_in_image"], want["low_in_image"]
+        bright[index] = want["brightens"]
         turns[index] = not want["monotone"]
-    return {"zero_in_image": zero, "low_in_image": low, "monotone": ~turns}
+    return {"zero_in_image": zero, "low_in_image": low, "brightens": bright, "monotone": ~turns}
 
 
 def assert_database_matches(database: Path) -> dict:
@@ -430,7 +464,7 @@ def assert_database_matches(database: Path) -> dict:
     assert audit.metrics["r_corner"][ok].tolist() == r_corner.tolist()
     want = independent_flags(audited, r_corner**2)
     counts = {}
-    for flag in ("zero_in_image", "low_in_image", "monotone"):
+    for flag in ("zero_in_image", "low_in_image", "brightens", "monotone"):
         got = audit.metrics[flag][ok]
         wrong = [
             f"{e.file}:{e.line}" for e, g, w in zip(audited, got, want[flag], strict=True) if g != w
@@ -440,13 +474,14 @@ def assert_database_matches(database: Path) -> dict:
     summary = audit.summary()
     assert summary["zero_in_image"] == counts["zero_in_image"]
     assert summary["low_in_image"] == counts["low_in_image"]
+    assert summary["brightens"] == counts["brightens"]
     assert summary["not_monotone"] == len(audited) - counts["monotone"]
     return counts
 
 
 def test_bundled_database_counts_match_an_independent_computation(bundled_db):
     counts = assert_database_matches(bundled_db)
-    assert counts["zero_in_image"] > 50
+    assert counts["zero_in_image"] > 50 and counts["brightens"] > 10
 
 
 def test_lensfun_head_counts_match_an_independent_computation(lensfun_head):
@@ -460,7 +495,11 @@ def test_severity_follows_the_flags(bundled_db):
     expected = np.where(
         m["zero_in_image"],
         "error",
-        np.where(m["low_in_image"], "warning", np.where(~m["monotone"], "notice", "")),
+        np.where(
+            m["low_in_image"] | m["brightens"],
+            "warning",
+            np.where(~m["monotone"], "notice", ""),
+        ),
     )
     assert m["severity"].tolist() == expected.tolist()
 
@@ -473,7 +512,7 @@ def test_findings_give_one_per_entry_with_its_code_and_severity(write_xml):
         lens_xml(
             '<vignetting model="pa" focal="8" aperture="4" distance="1000" k1="-0.5" k2="-0.6"/>',
             '<vignetting model="pa" focal="9" aperture="4" distance="1000" k1="-0.95"/>',
-            '<vignetting model="pa" focal="10" aperture="4" distance="1000" k1="-0.4" k2="0.5"/>',
+            '<vignetting model="pa" focal="10" aperture="4" distance="1000" k1="-0.4" k2="0.3"/>',
             '<vignetting model="pa" focal="11" aperture="4" distance="1000" k1="-0.3"/>',
             '<vignetting model="pa" focal="12" aperture="4" k1="-0.3"/>',
         )

@@ -20,16 +20,20 @@ Per entry, with w = r^2 and C a cubic in w:
   3 k3 w^2 vanishes);
 - ``r_turn``: the first radius where C' changes sign (``inf`` if never);
   C is monotone over the image when that lies beyond it;
+- ``c_max`` and ``r_cmax``: the maximum of C over the image, and where;
 - ``zero_in_image`` (C <= 0 somewhere in the image: the correction divides
   by zero or flips the sign of pixels; liblensfun then writes black),
   ``low_in_image`` (C < 0.1: a correction gain above 10, which amplifies the
-  noise tenfold) and ``monotone``, each decided exactly on the coefficients
+  noise tenfold), ``brightens`` (C > 1.05: the model has part of the image
+  more than 5% brighter than its centre, which no lens is; the correction
+  darkens it, as an FE 85 mm GM entry once did 3.4-fold at the corner,
+  removed in Lensfun's 5599955b) and ``monotone``, each decided exactly on the coefficients
   as the database writes them (:func:`lensaudit.calibrations.as_written`):
   the float answer where it is far from the boundary, rational arithmetic
   otherwise.
 
-Severity: ``error`` for zero_in_image, ``warning`` for low_in_image,
-``notice`` for a C that is not monotone over the image.
+Severity: ``error`` for zero_in_image, ``warning`` for low_in_image or
+brightens, ``notice`` for a C that is not monotone over the image.
 """
 
 from __future__ import annotations
@@ -69,26 +73,31 @@ FloatArray = NDArray[np.float64]
 #: C below this is a correction gain above 10 (a warning).
 LOW_CORRECTION = 0.1
 _LOW_EXACT = Fraction(1, 10)
+#: C above this somewhere in the image: brighter than the centre by more than
+#: calibration noise (a warning).
+BRIGHTENING = 1.05
+_BRIGHTENING_EXACT = Fraction(105, 100)
 
 ZERO_IN_IMAGE = "vignetting-zero-in-image"
 LOW_IN_IMAGE = "vignetting-low-in-image"
 NOT_MONOTONE = "vignetting-not-monotone"
+BRIGHTENS = "vignetting-brightens"
 
 #: How many entries the terminal summary lists by name.
 WORST_SHOWN = 15
 
 METRIC_COLUMNS = (
-    "r_corner", "r_zero", "c_min", "r_min", "r_turn", "zero_in_image", "low_in_image",
-    "monotone", "severity",
+    "r_corner", "r_zero", "c_min", "r_min", "c_max", "r_cmax", "r_turn", "zero_in_image",
+    "low_in_image", "brightens", "monotone", "severity",
 )  # fmt: skip
 COLUMNS = (
     *LENS_COLUMNS, "aperture", "distance", "k1", "k2", "k3", *METRIC_COLUMNS, *STATUS_COLUMNS,
 )  # fmt: skip
-BOOL_COLUMNS = frozenset({"zero_in_image", "low_in_image", "monotone"})
+BOOL_COLUMNS = frozenset({"zero_in_image", "low_in_image", "brightens", "monotone"})
 FLOAT_COLUMNS = (
     LENS_FLOAT_COLUMNS
     | {"aperture", "distance", "k1", "k2", "k3"}
-    | {"r_corner", "r_zero", "c_min", "r_min", "r_turn"}
+    | {"r_corner", "r_zero", "c_min", "r_min", "c_max", "r_cmax", "r_turn"}
 )
 
 #: What each column means, for --help and docs/vignetting.md.
@@ -98,9 +107,12 @@ COLUMN_HELP = {
     "r_zero": "first radius where C(r) changes sign (inf: never)",
     "c_min": "minimum of C(r) over the image, 0 <= r <= r_corner",
     "r_min": "where that minimum is",
+    "c_max": "maximum of C(r) over the image (1 at the centre)",
+    "r_cmax": "where that maximum is",
     "r_turn": "first radius where C'(r) changes sign (inf: never)",
     "zero_in_image": "C <= 0 somewhere in the image (error)",
     "low_in_image": "C < 0.1 somewhere in the image: correction gain above 10 (warning)",
+    "brightens": "C > 1.05 somewhere in the image: brighter than the centre (warning)",
     "monotone": "C has no turning point inside the image (false: notice)",
     "severity": "error, warning, notice, or empty",
 }
@@ -158,10 +170,33 @@ def exact_below(
     """Whether min C over 0 <= w <= w_image is below ``threshold`` (< if ``strict``,
     else <=), exactly, for finite coefficients taken :func:`as_written`.
     ``threshold`` < 1."""
+    return _exact_beyond(k1, k2, k3, w_image, threshold, strict, -1)
+
+
+def exact_above(
+    k1: float, k2: float, k3: float, w_image: float, threshold: Fraction, strict: bool
+) -> bool:
+    """Whether max C over 0 <= w <= w_image is above ``threshold`` (> if ``strict``,
+    else >=), exactly, as :func:`exact_below`. ``threshold`` > 1."""
+    return _exact_beyond(k1, k2, k3, w_image, threshold, strict, 1)
+
+
+def _exact_beyond(
+    k1: float,
+    k2: float,
+    k3: float,
+    w_image: float,
+    threshold: Fraction,
+    strict: bool,
+    side: int,
+) -> bool:
+    """Whether C - threshold takes the sign ``side`` (0 too unless ``strict``)
+    somewhere in 0 <= w <= w_image: at w = 0 it does not (C = 1), so at the
+    image's edge or at a turning point inside."""
     a1, a2, a3, limit = (as_written(v) for v in (k1, k2, k3, w_image))
 
     def hit(sign: int) -> bool:
-        return sign < 0 if strict else sign <= 0
+        return sign * side > 0 if strict else sign * side >= 0
 
     if hit(sign_of(1 + limit * (a1 + limit * (a2 + limit * a3)) - threshold)):
         return True
@@ -179,10 +214,21 @@ def exact_below(
 
 def exact_minimum(k1: float, k2: float, k3: float, w_image: float) -> tuple[float, float]:
     """(c_min, w where it is) over 0 <= w <= w_image, to about 1e-40 before rounding."""
+    return _exact_extreme(k1, k2, k3, w_image, min)
+
+
+def exact_maximum(k1: float, k2: float, k3: float, w_image: float) -> tuple[float, float]:
+    """(c_max, w where it is) over 0 <= w <= w_image, as :func:`exact_minimum`."""
+    return _exact_extreme(k1, k2, k3, w_image, max)
+
+
+def _exact_extreme(
+    k1: float, k2: float, k3: float, w_image: float, choose: Callable
+) -> tuple[float, float]:
     a1, a2, a3, limit = (as_written(v) for v in (k1, k2, k3, w_image))
     candidates = [Fraction(0), limit] + [t.value() for t in _turns_inside(k1, k2, k3, limit)]
     values = [1 + w * (a1 + w * (a2 + w * a3)) for w in candidates]
-    best = min(range(len(values)), key=values.__getitem__)
+    best = choose(range(len(values)), key=values.__getitem__)
     return to_float(values[best]), to_float(candidates[best])
 
 
@@ -200,20 +246,63 @@ def compute(
     k1, k2, k3, r_corner = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (k1, k2, k3, r_corner))
     )
-    size = k1.shape[0]
     w_image = np.square(r_corner)
     r_zero = np.sqrt(np.asarray(min_positive_root(k1, k2, k3), dtype=np.float64))
+    c_min, w_min, c_max, w_max, doubtful = _extremes(k1, k2, k3, w_image)
+    with np.errstate(all="ignore"):
+        zero_in_image = c_min <= 0
+        low_in_image = c_min < LOW_CORRECTION
+        brightens = c_max > BRIGHTENING
+    for index in np.flatnonzero(doubtful):
+        a, b, c, w = (float(v[index]) for v in (k1, k2, k3, w_image))
+        zero_in_image[index] = exact_below(a, b, c, w, Fraction(0), strict=False)
+        low_in_image[index] = exact_below(a, b, c, w, _LOW_EXACT, strict=True)
+        brightens[index] = exact_above(a, b, c, w, _BRIGHTENING_EXACT, strict=True)
+        c_min[index], w_min[index] = exact_minimum(a, b, c, w)
+        c_max[index], w_max[index] = exact_maximum(a, b, c, w)
 
+    w_turn, turns_inside = sign_change_before(k1, k2, k3, w_image)
+    warned = low_in_image | brightens
+    severity = np.where(
+        zero_in_image,
+        SEVERITY_ERROR,
+        np.where(warned, SEVERITY_WARNING, np.where(turns_inside, SEVERITY_NOTICE, "")),
+    ).astype(object)
+    return {
+        "r_corner": r_corner.copy(),
+        "r_zero": r_zero,
+        "c_min": c_min,
+        "r_min": np.sqrt(w_min),
+        "c_max": c_max,
+        "r_cmax": np.sqrt(w_max),
+        "r_turn": np.sqrt(w_turn),
+        "zero_in_image": zero_in_image,
+        "low_in_image": low_in_image,
+        "brightens": brightens,
+        "monotone": ~turns_inside,
+        "severity": severity,
+    }
+
+
+def _extremes(
+    k1: FloatArray, k2: FloatArray, k3: FloatArray, w_image: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """(c_min, w there, c_max, w there, doubtful) over 0 <= w <= w_image, in
+    floats: at the ends and the turning points inside. ``doubtful`` marks the
+    entries too near a threshold, or a turning point too near the edge, for
+    the floats to decide them: those are decided exactly."""
+    size = k1.shape[0]
     low, high, reliable = turning_points(k1, k2, k3)
+    rows = np.arange(size)
     with np.errstate(all="ignore"):
         points = np.stack([np.zeros(size), w_image, low, high], axis=1)
         inside = np.ones(points.shape, dtype=bool)
         inside[:, 2:] = (points[:, 2:] > 0) & (points[:, 2:] < w_image[:, None])
         values = _cubic(k1[:, None], k2[:, None], k3[:, None], points)
-        values = np.where(inside, values, np.inf)
-        best = np.argmin(values, axis=1)
-        c_min = values[np.arange(size), best]
-        w_min = points[np.arange(size), best]
+        lowest = np.argmin(np.where(inside, values, np.inf), axis=1)
+        highest = np.argmax(np.where(inside, values, -np.inf), axis=1)
+        c_min, w_min = values[rows, lowest], points[rows, lowest]
+        c_max, w_max = values[rows, highest], points[rows, highest]
         size_of_terms = 1 + np.abs(k1) * w_image + np.abs(k2) * w_image**2 + np.abs(k3) * w_image**3
         near_edge = (np.abs(low - w_image) <= MARGIN * w_image) | (
             np.abs(high - w_image) <= MARGIN * w_image
@@ -222,35 +311,13 @@ def compute(
             ~reliable
             | near_edge
             | ~np.isfinite(c_min)
+            | ~np.isfinite(c_max)
             | ~np.isfinite(size_of_terms)
             | (np.abs(c_min) <= MARGIN * size_of_terms)
             | (np.abs(c_min - LOW_CORRECTION) <= MARGIN * size_of_terms)
+            | (np.abs(c_max - BRIGHTENING) <= MARGIN * size_of_terms)
         )
-        zero_in_image = c_min <= 0
-        low_in_image = c_min < LOW_CORRECTION
-    for index in np.flatnonzero(doubtful):
-        a, b, c, w = (float(v[index]) for v in (k1, k2, k3, w_image))
-        zero_in_image[index] = exact_below(a, b, c, w, Fraction(0), strict=False)
-        low_in_image[index] = exact_below(a, b, c, w, _LOW_EXACT, strict=True)
-        c_min[index], w_min[index] = exact_minimum(a, b, c, w)
-
-    w_turn, turns_inside = sign_change_before(k1, k2, k3, w_image)
-    severity = np.where(
-        zero_in_image,
-        SEVERITY_ERROR,
-        np.where(low_in_image, SEVERITY_WARNING, np.where(turns_inside, SEVERITY_NOTICE, "")),
-    ).astype(object)
-    return {
-        "r_corner": r_corner.copy(),
-        "r_zero": r_zero,
-        "c_min": c_min,
-        "r_min": np.sqrt(w_min),
-        "r_turn": np.sqrt(w_turn),
-        "zero_in_image": zero_in_image,
-        "low_in_image": low_in_image,
-        "monotone": ~turns_inside,
-        "severity": severity,
-    }
+    return c_min, w_min, c_max, w_max, doubtful
 
 
 class VignettingAudit(CalibrationAudit):
@@ -274,13 +341,13 @@ class VignettingAudit(CalibrationAudit):
 
     def worst(self, limit: int | None = None) -> list[int]:
         """Indices of the entries with a finding, by increasing c_min."""
-        c_min = self.metrics["c_min"]
+        c_min, low = self.metrics["c_min"], self.metrics["low_in_image"]
         flagged = [
             i
             for i, (severity, ok) in enumerate(
                 zip(self.metrics["severity"].tolist(), self.audited, strict=True)
             )
-            if ok and severity in (SEVERITY_ERROR, SEVERITY_WARNING)
+            if ok and severity in (SEVERITY_ERROR, SEVERITY_WARNING) and low[i]
         ]
         flagged.sort(key=lambda i: (c_min[i], self.entries[i].file, self.entries[i].line))
         return flagged[:limit]
@@ -307,6 +374,12 @@ class VignettingAudit(CalibrationAudit):
         summary.update(
             zero_in_image=int(np.count_nonzero(self.metrics["zero_in_image"] & audited)),
             low_in_image=int(np.count_nonzero(self.metrics["low_in_image"] & audited)),
+            brightens=int(np.count_nonzero(self.metrics["brightens"] & audited)),
+            brightens_alone=int(
+                np.count_nonzero(
+                    self.metrics["brightens"] & ~self.metrics["low_in_image"] & audited
+                )
+            ),
             not_monotone=int(np.count_nonzero(~self.metrics["monotone"] & audited)),
             worst=[f"{self.entries[i].file}:{self.entries[i].line}" for i in self.worst(20)],
         )
@@ -331,6 +404,12 @@ class VignettingAudit(CalibrationAudit):
                     "warning",
                     summary["low_in_image"] - summary["zero_in_image"],
                     "0 < C < 0.1 inside the image: a correction gain above 10",
+                ],
+                [
+                    "warning",
+                    summary["brightens_alone"],
+                    f"C > {BRIGHTENING:g} inside the image: brighter than the centre "
+                    "(and none of the above)",
                 ],
                 [
                     "notice",
@@ -398,11 +477,19 @@ def _finding(record: dict[str, Any]) -> tuple[str, str, str] | None:
             f"{crossing}: the correction divides by zero there and flips the sign "
             "of the pixels where C < 0"
         )
-    elif severity == SEVERITY_WARNING:
+    elif severity == SEVERITY_WARNING and record["low_in_image"]:
         code = LOW_IN_IMAGE
         text = (
             f"C(r) falls to {c_min:.4g} at {at}: the correction multiplies those pixels "
             f"(and their noise) by {1 / c_min:.3g}"
+        )
+    elif severity == SEVERITY_WARNING:
+        code = BRIGHTENS
+        at = f"r = {record['r_cmax']:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g})"
+        text = (
+            f"C(r) rises to {record['c_max']:.4g} at {at}: the model has that part of the "
+            f"image {record['c_max']:.3g} times as bright as its centre, which no lens is; "
+            "the correction darkens it"
         )
     else:
         code = NOT_MONOTONE

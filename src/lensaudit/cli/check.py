@@ -99,6 +99,8 @@ def check(
       tca-fold-in-image    a colour channel folds inside the image
     Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
       vignetting-low-in-image (C(r) < 0.1 inside the image);
+      vignetting-brightens (C(r) > 1.05 inside the image: brighter
+      than the centre, which no lens is);
       duplicate-lens and duplicate-focal when the two are identical.
     Notices: baseline-unreadable (how a baseline file that cannot be parsed
       was replaced).
