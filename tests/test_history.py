@@ -698,7 +698,7 @@ def test_cli_run_again_writes_the_same_files_without_drawing(repo, tmp_path, mon
     from lensaudit.cli import history as cli_history
 
     cache = tmp_path / "cache"
-    args = ["history", str(repo.path), "--cache", str(cache), "-q", "-o"]
+    args = ["history", str(repo.path), "--cache-dir", str(cache), "-q", "-o"]
     assert CliRunner().invoke(main, [*args, str(tmp_path / "first")]).exit_code == 0
     monkeypatch.setattr(cli_history, "_draw", lambda *a: pytest.fail("drawn again"))
     assert CliRunner().invoke(main, [*args, str(tmp_path / "second")]).exit_code == 0
@@ -711,7 +711,7 @@ def test_cli_draws_the_figures_again_when_the_history_changes(repo, tmp_path, mo
     from lensaudit.cli import history as cli_history
 
     cache = tmp_path / "cache"
-    args = ["history", str(repo.path), "--cache", str(cache), "-q", "-o", str(tmp_path / "o")]
+    args = ["history", str(repo.path), "--cache-dir", str(cache), "-q", "-o", str(tmp_path / "o")]
     assert CliRunner().invoke(main, args).exit_code == 0
     drawn = []
     real = cli_history._draw
@@ -723,7 +723,8 @@ def test_cli_draws_the_figures_again_when_the_history_changes(repo, tmp_path, mo
 
 def test_cli_summary_names_the_newest_revision(repo, tmp_path):
     result = CliRunner().invoke(
-        main, ["history", str(repo.path), "-o", str(tmp_path), "--cache", str(tmp_path / "cache")]
+        main,
+        ["history", str(repo.path), "-o", str(tmp_path), "--cache-dir", str(tmp_path / "cache")],
     )
     assert result.exit_code == 0, result.output
     assert "11 commits, 10 change the database" in result.output
@@ -761,7 +762,7 @@ def test_cli_file_versions_read_and_from_the_last_run_add_up(repo, tmp_path, run
         result = CliRunner().invoke(
             main,
             ["history", str(repo.path), "-o", str(tmp_path / str(number))]
-            + ["--cache", str(cache), *args],
+            + ["--cache-dir", str(cache), *args],
         )
         assert result.exit_code == 0, result.output
         found = [VERSIONS_LINE.match(line) for line in result.output.splitlines()]

@@ -140,8 +140,8 @@ def test_default_is_the_bundled_database(runner, bundled_db):
 
 VIGNETTING_HEADER = (
     "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,aperture,distance,"
-    "k1,k2,k3,r_corner,r_zero,c_min,r_min,r_turn,zero_in_image,low_in_image,monotone,"
-    "severity,status,message"
+    "k1,k2,k3,r_corner,r_zero,c_min,r_min,c_max,r_cmax,r_turn,zero_in_image,low_in_image,"
+    "brightens,monotone,severity,status,message"
 )
 TCA_HEADER = (
     "file,line,maker,lens,type,crop_factor,aspect_ratio,model,focal,kr,kb,vr,vb,cr,cb,br,bb,"

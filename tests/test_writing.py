@@ -211,7 +211,7 @@ def test_ctrl_c_is_status_130_with_no_partial_output_and_a_valid_cache(tmp_path)
     outcomes = set()
     for turn, delay in enumerate((0.8, 1.6, 2.4, 3.2)):
         out = tmp_path / f"out-{turn}"
-        done = interrupted_after(delay, "history", clone, "-o", out, "--cache", cache, "-q")
+        done = interrupted_after(delay, "history", clone, "-o", out, "--cache-dir", cache, "-q")
         outcomes.add(done.returncode)
         if done.returncode == 130:
             assert done.stderr.strip().splitlines()[-1] == "lensaudit: interrupted"
@@ -223,7 +223,7 @@ def test_ctrl_c_is_status_130_with_no_partial_output_and_a_valid_cache(tmp_path)
     assert 130 in outcomes
     again = tmp_path / "again"
     fresh = tmp_path / "fresh"
-    for out, cache_words in ((again, ["--cache", cache]), (fresh, ["--no-cache"])):
+    for out, cache_words in ((again, ["--cache-dir", cache]), (fresh, ["--no-cache"])):
         subprocess.run(
             [sys.executable, "-m", "lensaudit", "history", clone, "-o", out, "-q", *cache_words],
             check=True,

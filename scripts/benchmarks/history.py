@@ -79,7 +79,7 @@ def run(quick: bool) -> list[dict]:
         )
         environment = dict(os.environ, LENSAUDIT_CACHE_DIR=str(work / "unused-cache"))
         out = str(work / "out")
-        history = ["history", str(clone), "-o", out, "-q", "--cache"]
+        history = ["history", str(clone), "-o", out, "-q", "--cache-dir"]
         times: dict[str, list[float]] = {"scan": [], "cold": [], "warm": [], "new": []}
         times |= {name: [] for name in SWITCHES}
         for turn in range(3 if quick else 5):

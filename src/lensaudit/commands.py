@@ -46,6 +46,7 @@ SCAN_OPTIONS: dict[str, str] = {
     "--output": "output",
     "--cache": "cache",
     "--no-cache": "cache",
+    "--cache-dir": "cache_dir",
 }
 #: Of those, the flags (the others take a value).
 SCAN_FLAGS = ("--cache", "--no-cache")
@@ -54,13 +55,13 @@ SCAN_FLAGS = ("--cache", "--no-cache")
 class ScanArguments(
     namedtuple(
         "ScanArguments",
-        ("paths", "output_format", "kind", "output", "cache"),
-        defaults=((), "table", "distortion", None, True),
+        ("paths", "output_format", "kind", "output", "cache", "cache_dir"),
+        defaults=((), "table", "distortion", None, True, None),
     )
 ):
     """A scan's command line: database ``paths`` as given (a tuple; none: the
     default database), ``output_format``, ``kind``, ``output`` file (None:
-    standard output), ``cache`` (a bool)."""
+    standard output), ``cache`` (a bool), ``cache_dir`` (None: the default)."""
 
     __slots__ = ()
 
@@ -101,7 +102,15 @@ def scan_arguments(words: list[str]) -> ScanArguments | None:
         return None
     if found.output is not None and (not found.output or os.path.isdir(found.output)):
         return None  # click's own message says what is wrong with it
+    if found.cache_dir is not None and (not found.cache_dir or os.path.isfile(found.cache_dir)):
+        return None
     return found
+
+
+def use_cache_dir(directory: str | os.PathLike[str]) -> None:
+    """Make ``directory`` the cache's directory for this run (and the processes
+    it starts): what ``--cache-dir`` does, the same as $LENSAUDIT_CACHE_DIR."""
+    os.environ["LENSAUDIT_CACHE_DIR"] = os.fspath(directory)
 
 
 def fail(message: str) -> NoReturn:
@@ -164,6 +173,8 @@ def scan(arguments: ScanArguments) -> None:
     paths = [Path(path) for path in arguments.paths]
     output = None if arguments.output is None else Path(arguments.output)
     refuse_writing_inputs([output], paths)
+    if arguments.cache_dir is not None:
+        use_cache_dir(arguments.cache_dir)
     single_blas_thread()
     collecting = gc.isenabled()
     # What the scan allocates lives until it ends: the cycle collector would

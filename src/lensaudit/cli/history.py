@@ -12,7 +12,7 @@ from ..commands import refuse_writing_inputs
 from ..history import HistoryError, audit_history, trend_figure
 from ..history.index import caches, key_of
 from ..writing import OutputSet
-from .options import fail
+from .options import cache_option, fail
 
 
 @click.command()
@@ -57,16 +57,7 @@ from .options import fail
     type=click.Path(path_type=Path, file_okay=False),
     help="Directory for history.csv, introduced.csv, trend.png and trend.svg.",
 )
-@click.option(
-    "--cache",
-    "cache_dir",
-    metavar="DIR",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Directory of lensaudit's cache, which keeps each file version read and the last "
-    "run [default: $LENSAUDIT_CACHE_DIR, else ~/.cache/lensaudit].",
-)
-@click.option("--no-cache", is_flag=True, help="Neither read nor write the cache.")
+@cache_option
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 def history(
     repository: Path,
@@ -76,8 +67,7 @@ def history(
     until: str | None,
     first_parent: bool,
     output_dir: Path,
-    cache_dir: Path | None,
-    no_cache: bool,
+    cache: bool,
     quiet: bool,
 ) -> None:
     """Audit every revision of a Lensfun database kept in git.
@@ -102,7 +92,7 @@ def history(
         output_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         fail(f"cannot create {output_dir}: {error.strerror or error}")
-    cache: bool | Path = False if no_cache else cache_dir or True
+    # --cache-dir has named the directory by now, as $LENSAUDIT_CACHE_DIR does.
     bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
     try:
         result = audit_history(

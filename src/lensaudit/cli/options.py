@@ -9,7 +9,14 @@ from typing import Any
 import click
 
 # Shared with the click-free scan of the console command.
-from ..commands import EXIT_INPUT_ERROR, FORMAT_NAMES, fail, output_stream, refuse_writing_inputs
+from ..commands import (
+    EXIT_INPUT_ERROR,
+    FORMAT_NAMES,
+    fail,
+    output_stream,
+    refuse_writing_inputs,
+    use_cache_dir,
+)
 
 __all__ = [
     "EXIT_INPUT_ERROR",
@@ -60,12 +67,29 @@ def format_option(help: str) -> Callable[[Callable[..., Any]], Callable[..., Any
 
 
 def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``--cache/--no-cache``: the parse cache, on by default (scan, fix, report, plot)."""
+    """``--cache/--no-cache`` (given as ``cache``: on by default) and
+    ``--cache-dir DIR``: lensaudit's one cache, with the same meaning in
+    every command."""
+    function = click.option(
+        "--cache-dir",
+        metavar="DIR",
+        type=click.Path(path_type=Path, file_okay=False),
+        default=None,
+        expose_value=False,
+        callback=_use_cache_dir,
+        help="The cache's directory [default: $LENSAUDIT_CACHE_DIR, else "
+        "$XDG_CACHE_HOME/lensaudit, else ~/.cache/lensaudit].",
+    )(function)
     return click.option(
         "--cache/--no-cache",
         default=True,
         show_default=True,
         help="Reuse what an earlier run made of files whose content is unchanged (the "
-        "cache is keyed on a hash of each file's bytes); it is in $LENSAUDIT_CACHE_DIR "
-        "or ~/.cache/lensaudit.",
+        "cache is keyed on a hash of each file's bytes).",
     )(function)
+
+
+def _use_cache_dir(context: click.Context, parameter: click.Parameter, value: Path | None) -> None:
+    """--cache-dir DIR: the cache's directory for this run, as $LENSAUDIT_CACHE_DIR names it."""
+    if value is not None:
+        use_cache_dir(value)
