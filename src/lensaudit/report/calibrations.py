@@ -31,11 +31,16 @@ def _rows_table(table_id: str, caption: str, header: list[str], rows: list[list[
         f'<th scope="col"{" class=n" if n else ""}>{escape(h)}</th>'
         for h, n in zip(header, numeric, strict=True)
     )
+    # The page's stylesheet keeps a file:line (class "where") on one line.
+    cell_classes = [
+        " class=n" if n else (" class=where" if h == "where" else "")
+        for h, n in zip(header, numeric, strict=True)
+    ]
     body = "".join(
         "<tr>"
         + "".join(
-            f"<td{' class=n' if n else ''}>{escape(c)}</td>"
-            for c, n in zip(row, numeric, strict=True)
+            f"<td{cell_class}>{escape(c)}</td>"
+            for c, cell_class in zip(row, cell_classes, strict=True)
         )
         + "</tr>"
         for row in rows

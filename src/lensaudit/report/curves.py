@@ -139,17 +139,18 @@ def _text_width(text: str, size: float) -> float:
     return 0.62 * size * len(text)
 
 
-def sketch_svg(curve: Curve, width: int = 260, height: int = 160) -> str:
-    """A small SVG of D(r) for inlining in HTML: the curve, r_max and the image corner.
+def sketch_svg(curve: Curve, width: int = 480, height: int = 300) -> str:
+    """An SVG of D(r) for inlining in HTML: the curve, r_max and the image corner.
 
     The horizontal line is the image corner radius (distorted); the model folds
     inside the image when the curve's peak at r_max stays below it. Everything
-    is drawn inside the ``width`` x ``height`` view box: the curve is clamped to
-    the plot (use :func:`sketch_sample` so that it does not need to be), labels
-    are kept off the edges.
+    is drawn inside the ``width`` x ``height`` view box (user units, drawn as CSS
+    pixels unless the page scales the SVG): the curve is clamped to the plot
+    (use :func:`sketch_sample` so that it does not need to be), labels are kept
+    off the edges.
     """
-    font = 10
-    pad_left, pad_right, pad_top, pad_bottom = 34, 8, 16, 30
+    font = 14
+    pad_left, pad_right, pad_top, pad_bottom = 46, 10, 22, 42
     plot_w = width - pad_left - pad_right
     plot_h = height - pad_top - pad_bottom
     plot_bottom = pad_top + plot_h
@@ -178,35 +179,36 @@ def sketch_svg(curve: Curve, width: int = 260, height: int = 160) -> str:
     if math.isfinite(curve.r_corner):
         parts.append(
             f'<line x1="{pad_left}" x2="{pad_left + plot_w}" y1="{y(curve.r_corner):.1f}" '
-            f'y2="{y(curve.r_corner):.1f}" stroke="#1f77b4" stroke-dasharray="4 3"/>'
+            f'y2="{y(curve.r_corner):.1f}" stroke="#1f77b4" stroke-width="1.5" '
+            f'stroke-dasharray="6 4"/>'
         )
-    parts.append(f'<polyline points="{points}" fill="none" stroke="#222" stroke-width="1.5"/>')
+    parts.append(f'<polyline points="{points}" fill="none" stroke="#222" stroke-width="2.5"/>')
     shows_r_max = math.isfinite(curve.r_max) and 0 <= curve.r_max <= x_end
     if shows_r_max:
         parts.append(
             f'<line x1="{x(curve.r_max):.1f}" x2="{x(curve.r_max):.1f}" y1="{pad_top}" '
-            f'y2="{plot_bottom}" stroke="#d62728" stroke-dasharray="3 2"/>'
+            f'y2="{plot_bottom}" stroke="#d62728" stroke-width="1.5" stroke-dasharray="5 3"/>'
         )
         parts.append(
-            f'<circle cx="{x(curve.r_max):.1f}" cy="{y(curve.d_max):.1f}" r="3" fill="#d62728"/>'
+            f'<circle cx="{x(curve.r_max):.1f}" cy="{y(curve.d_max):.1f}" r="4.5" fill="#d62728"/>'
         )
-    axis_row = plot_bottom + font + 1
+    axis_row = plot_bottom + font + 2
     labels = [
-        (pad_left, pad_top - 4, "start", "#222", "D(r)"),
-        (pad_left - 3, y(0) + 4, "end", "#555", "0"),
+        (pad_left, pad_top - 6, "start", "#222", "D(r)"),
+        (pad_left - 4, y(0) + 5, "end", "#555", "0"),
         (pad_left, axis_row, "middle", "#555", "0"),
         (pad_left + plot_w, axis_row, "end", "#555", f"r {x_end:.2f}"),
     ]
     if math.isfinite(curve.r_corner):
         labels.append(
-            (pad_left - 3, y(curve.r_corner) + 4, "end", "#1f77b4", f"{curve.r_corner:.2f}")
+            (pad_left - 4, y(curve.r_corner) + 5, "end", "#1f77b4", f"{curve.r_corner:.2f}")
         )
     if shows_r_max:
         text = f"r_max {curve.r_max:.3g}"
         half = _text_width(text, font) / 2
         # Centred under the red line, but never past the sketch's edges.
         centre = min(max(x(curve.r_max), half + 1), width - half - 1)
-        labels.append((centre, height - 4, "middle", "#d62728", text))
+        labels.append((centre, height - 5, "middle", "#d62728", text))
     for lx, ly, anchor, colour, text in labels:
         parts.append(
             f'<text x="{lx:.1f}" y="{ly:.1f}" text-anchor="{anchor}" fill="{colour}" '

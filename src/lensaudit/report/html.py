@@ -48,7 +48,12 @@ ENTRY_COLUMNS = (
 
 # The entry table's box may be wider than the text (up to 1400 px, centred)
 # and scrolls on its own, both ways with a sticky heading, so that the page
-# itself never scrolls sideways.
+# itself never scrolls sideways. A file:line (class "where") never breaks at
+# its hyphens: in a narrow window the table scrolls instead. The width the
+# longest (compact-konica-minolta.xml:NNN) takes is won back by narrower
+# padding and headings, so that the whole table still fits at 1400 px.
+# A fold's sketch takes its card's width (two cards a row at 1400 px, one at
+# 800 px), up to 520 px.
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1b1b1b}
 main{max-width:1200px;margin:0 auto;padding:1em 1.5em 3em}
@@ -59,16 +64,18 @@ table{border-collapse:collapse;font-variant-numeric:tabular-nums}
 th,td{padding:.25em .6em;border-bottom:1px solid #e3e3e3;text-align:left}
 td.n,th.n{text-align:right}caption{text-align:left;padding:.3em 0;color:#444}
 .figure svg{max-width:100%;height:auto}.note{color:#555;font-size:.92em}
-.folds{display:grid;grid-template-columns:repeat(auto-fill,minmax(340px,1fr));gap:1em}
-.fold{border:1px solid #ddd;border-radius:6px;padding:.6em .8em}
+.folds{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(100%,440px),1fr));gap:1em}
+.fold{border:1px solid #ddd;border-radius:6px;padding:.6em .8em;min-width:0}
+.fold svg{display:block;width:100%;max-width:520px;height:auto}.where{white-space:nowrap}
 .fold h3{font-size:1em;margin:.1em 0 .4em}.fold dl{display:grid;
 grid-template-columns:max-content 1fr;gap:0 .8em;margin:.4em 0 0;font-size:.9em}
 .fold dd{margin:0}.controls{display:flex;flex-wrap:wrap;gap:.6em 1.2em;align-items:center;
 margin:.6em 0}.scroll{overflow-x:auto;max-width:100%}
 .entries-box{overflow:auto;max-height:85vh;border:1px solid #e3e3e3;
 width:min(calc(100vw - 3em),1400px);position:relative;left:50%;transform:translateX(-50%)}
-#entries{font-size:.85em;width:100%}#entries th,#entries td{padding:.25em .4em}
-#entries th{cursor:pointer;position:sticky;top:0;z-index:1;background:#f6f6f6;user-select:none}
+#entries{font-size:.85em;width:100%}#entries th,#entries td{padding:.25em .3em}
+#entries th{font-size:.92em;cursor:pointer;position:sticky;top:0;z-index:1;background:#f6f6f6;
+user-select:none}
 #entries th[aria-sort=ascending]::after{content:" \\25B2"}
 #entries th[aria-sort=descending]::after{content:" \\25BC"}
 #entries tr.fold-row td{background:#fdecea}code{font-size:.92em}
@@ -181,6 +188,7 @@ _SCRIPT = r"""
         var td = document.createElement("td");
         td.textContent = show(value, index);
         if (numeric[index]) td.className = "n";
+        else if (keys[index] === "where") td.className = "where";
         tr.appendChild(td);
       });
       fragment.appendChild(tr);
@@ -324,7 +332,10 @@ def _folding(audit: Audit) -> str:
             ("r_normalized", _number(float(m.r_normalized[index]), 3)),
             ("paper's units", _number(float(m.r_normalized_paper[index]), 3)),
         ]
-        details = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in facts)
+        details = "".join(
+            f"<dt>{escape(k)}</dt><dd{' class=where' if k == 'where' else ''}>{escape(v)}</dd>"
+            for k, v in facts
+        )
         cards.append(
             f'<article class="fold" data-where="{escape(entry.file)}:{entry.line}">'
             f"<h3>{escape(entry.lens)} at {entry.focal:g} mm</h3>"
