@@ -42,7 +42,9 @@ def test_fold_in_the_image_exits_1_with_file_and_line(runner, write_xml):
     path = write_xml(lens_xml(FINE, FOLDING))
     result = run(runner, str(path.parent))
     assert result.exit_code == 1
-    assert result.output.startswith(f"{path}:11: error [fold-in-image] Test 10mm (poly3, 10 mm")
+    first, second = result.output.splitlines()[:2]
+    assert first.startswith("lensaudit check: ") and str(path.parent) in first  # what was read
+    assert second.startswith(f"{path}:11: error [fold-in-image] Test 10mm (poly3, 10 mm")
 
 
 def test_warning_alone_exits_0(runner, write_xml):
@@ -66,7 +68,7 @@ def test_margin_that_is_not_a_number_of_at_least_one_is_a_usage_error(runner, wr
 
 def test_verbose_adds_notices_that_do_not_fail(runner, write_xml):
     path = str(write_xml(lens_xml(OUTSIDE)))
-    assert "notice" not in run(runner, path).output
+    assert "notice" not in run(runner, path).output.split("\n", 1)[1]  # under the header
     result = run(runner, path, "--verbose")
     assert result.exit_code == 0
     assert "notice [fold-outside-image]" in result.output

@@ -85,6 +85,7 @@ def test_github_annotates_new_findings_only_and_ends_with_the_verdict():
 def test_text_lists_new_findings_then_known_ones_then_the_verdict():
     lines = render("text", result(BROKEN, NEAR, KNOWN, baseline="HEAD")).splitlines()
     assert lines == [
+        "lensaudit check: test database",
         "data/db/b.xml:3:7: error [xml-error] XML is not well-formed at line 3",
         "data/db/a.xml:20: warning [fold-near-image] Lens: near",
         "",

@@ -25,10 +25,11 @@ def finding_line(finding: Finding) -> str:
 
 
 def lines(result: CheckResult) -> list[str]:
-    """The report as lines of text."""
+    """The report as lines of text: the database checked first."""
     new = [f for f in result.findings if not f.known]
     known = [f for f in result.findings if f.known]
-    out = [finding_line(f) for f in new]
+    out = [f"lensaudit check: {printable(result.database)}"]
+    out += [finding_line(f) for f in new]
     if known:
         if out:
             out.append("")

@@ -80,9 +80,10 @@ def check(
 ) -> None:
     """Fail when a Lensfun database, or a change to it, has models that fold.
 
-    PATH is a database directory (every *.xml in it), a Lensfun checkout (its
-    data/db) or XML files; without PATH, the database of the Lensfun checkout
-    around the working directory, else the one bundled with lensfunpy.
+    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    (its data/db) or XML files. Without PATH: the database of the Lensfun
+    checkout around the working directory, else the one bundled with
+    lensfunpy.
 
     \b
     Errors (fail the check):

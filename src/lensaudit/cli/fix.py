@@ -116,8 +116,11 @@ def fix(
     counts as fixed when the largest change is within --tolerance; the others
     are reported with the reason.
 
-    PATH is a database directory or XML files; without PATH, the database
-    bundled with lensfunpy is examined (and never written). Without --write,
+    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    (its data/db) or XML files. Without PATH: the database of the Lensfun
+    checkout around the working directory, else the one bundled with
+    lensfunpy. The
+    database bundled with lensfunpy is never written. Without --write,
     the unified diff of what would change is printed. With --write, the files
     are patched in place: only the changed attribute values, every other byte
     as it was, each file replaced atomically; if any file changed since it

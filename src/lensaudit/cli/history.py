@@ -11,12 +11,13 @@ import click
 from ..commands import refuse_writing_inputs
 from ..history import HistoryError, audit_history, trend_figure
 from ..history.index import caches, key_of
+from ..read.paths import enclosing_database
 from ..writing import OutputSet
 from .options import cache_option, fail
 
 
 @click.command()
-@click.argument("repository", metavar="REPO", type=click.Path(path_type=Path))
+@click.argument("repository", metavar="[REPO]", required=False, type=click.Path(path_type=Path))
 @click.option(
     "--path",
     "db_path",
@@ -60,7 +61,7 @@ from .options import cache_option, fail
 @cache_option
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 def history(
-    repository: Path,
+    repository: Path | None,
     db_path: str,
     revision: str,
     since: str | None,
@@ -72,7 +73,9 @@ def history(
 ) -> None:
     """Audit every revision of a Lensfun database kept in git.
 
-    Reads the commits of REPO oldest to newest through git (nothing is
+    REPO is a git repository holding a Lensfun database; without REPO, the
+    Lensfun checkout around the working directory (the database bundled with
+    lensfunpy has no history). Reads the commits of REPO oldest to newest through git (nothing is
     checked out) and, for each commit that changes the database, counts the
     distortion entries per model, those with a finite r_max and those that
     fold inside their own image, in Hugin units and in the paper's units.
@@ -87,6 +90,7 @@ def history(
 
     A progress bar is drawn when standard error is a terminal.
     """
+    repository = repository if repository is not None else _checkout()
     refuse_writing_inputs([output_dir], [repository / db_path], repository / ".git")
     try:
         output_dir.mkdir(parents=True, exist_ok=True)
@@ -115,6 +119,17 @@ def history(
     written = _write_outputs(result, output_dir, cache)
     if not quiet:
         _print_summary(result, written)
+
+
+def _checkout() -> Path:
+    """The Lensfun checkout around the working directory; exit 2 outside one."""
+    found = enclosing_database()
+    if found is None:
+        fail(
+            "no REPO, and the working directory is in no Lensfun checkout "
+            "(the database bundled with lensfunpy has no history): give REPO"
+        )
+    return found.parents[1]
 
 
 class _ProgressBar:

@@ -48,8 +48,9 @@ def _entry_options(function: Callable[..., Any]) -> Callable[..., Any]:
             multiple=True,
             metavar="PATH",
             type=click.Path(path_type=Path),
-            help="Database directory or XML file (repeatable; default: the "
-            "database bundled with lensfunpy).",
+            help="Database directory or XML file (repeatable) [default: the "
+            "database of the Lensfun checkout around the working directory, else the one "
+            "bundled with lensfunpy].",
         ),
         cache_option,
     ]
@@ -115,7 +116,7 @@ def resolve_entry(
         audit = _audit(list(databases), cache)
         return audit, select.by_query(audit, query)
     except select.SelectionError as error:
-        click.echo(f"lensaudit: error: {error}", err=True)
+        click.echo(f"lensaudit: error: {error}, in {audit.source.label}", err=True)
         for index in error.candidates:
             click.echo(f"  {select.describe(audit.entries[index])}", err=True)
         raise SystemExit(EXIT_INPUT_ERROR) from None
@@ -130,6 +131,11 @@ def _save(figure: Any, output: Path) -> None:
     except OSError as error:
         fail(f"cannot write {output}: {error.strerror or error}")
     click.echo(f"Wrote {output}")
+
+
+def _from(audit: Audit) -> None:
+    """The first line: the database read."""
+    click.echo(f"lensaudit plot: {audit.source.label}")
 
 
 @click.group()
@@ -163,6 +169,7 @@ def curve(
     """
     _check_output(output, entry, databases)
     audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
+    _from(audit)
     from ..report import curves, figures, select  # numpy and matplotlib: --help stays quick
 
     m = audit.metrics
@@ -226,6 +233,7 @@ def warp(
     if scale is not None and not (0 < scale <= 10 and math.isfinite(scale)):
         fail("--scale must be a number in (0, 10]")
     audit, index = resolve_entry(entry, lens, focal, crop, databases, cache)
+    _from(audit)
     from ..report import figures, select  # numpy and matplotlib: --help stays quick
     from ..report import warp as warping  # numpy and matplotlib: --help stays quick
 

@@ -50,7 +50,9 @@ if TYPE_CHECKING:
     multiple=True,
     metavar="PATH",
     type=click.Path(path_type=Path),
-    help="Database directory or XML file for --lens (default: lensfunpy's).",
+    help="Database directory or XML file for --lens and --entry [default: the "
+    "database of the Lensfun checkout around the working directory, else the one "
+    "bundled with lensfunpy].",
 )
 @click.option(
     "--opencv",
@@ -240,32 +242,37 @@ def _lensfun_camera(
 
 
 def _entry_at(text: str) -> DistortionEntry:
-    """The entry at FILE:LINE; a FILE that does not exist is looked for in the bundled database."""
+    """The entry at FILE:LINE; a FILE that does not exist is looked for in the
+    default database (the Lensfun checkout around the working directory,
+    else the one bundled with lensfunpy)."""
 
     name, sep, line_text = text.rpartition(":")
     if not sep or not line_text.isdigit():
         fail(f"--entry {text!r}: expected FILE:LINE, e.g. slr-tokina.xml:17")
     path = Path(name)
+    where = display_path(path)
     if not path.is_file():
         try:
-            bundled = read.paths.bundled_database_path() / name
-        except LoadError:
-            bundled = None
-        if bundled is None or not bundled.is_file():
-            fail(f"--entry {text!r}: no such file {name!r} (nor in the bundled database)")
-        path = bundled
+            source = read.resolve(None)
+        except LoadError as error:
+            fail(f"--entry {text!r}: no such file {name!r}, and no default database: {error}")
+        path = source.paths[0] / name
+        where = f"{name} in {source.label}"
+        if not path.is_file():
+            fail(f"--entry {text!r}: no such file {name!r}, nor in {source.label}")
     line = int(line_text)
     entries = read.read([path]).entries()
     matches = [e for e in entries if e.line == line]
     if not matches:
         lines = ", ".join(str(e.line) for e in entries[:8] if e.line)
         fail(
-            f"{name}:{line}: no <distortion> element starts on that line"
+            f"{where}:{line}: no <distortion> element starts on that line"
             + (f" (entries start on lines {lines}, ...)" if lines else "")
         )
     found = matches[0]
     if found.status != STATUS_OK:
-        fail(f"{name}:{line}: entry cannot be used ({found.status}: {found.message})")
+        fail(f"{where}:{line}: entry cannot be used ({found.status}: {found.message})")
+    click.echo(f"lensaudit project: {found.lens} at {found.focal:g} mm, from {where}", err=True)
     return found
 
 
@@ -274,15 +281,16 @@ def _entry_by_name(
 ) -> DistortionEntry:
 
     try:
-        entries = read.read(list(databases) or None).entries()
+        database = read.read(list(databases) or None)
     except LoadError as error:
         fail(str(error))
+    entries, label = database.entries(), database.source.label
     needle = text.casefold()
     named = [
         e for e in entries if e.status == STATUS_OK and needle in f"{e.maker} {e.lens}".casefold()
     ]
     if not named:
-        fail(f"--lens {text!r}: no usable distortion entry of a lens with that name")
+        fail(f"--lens {text!r}: no usable distortion entry of a lens with that name in {label}")
     lenses = sorted({e.lens for e in named})
     exact = [name for name in lenses if name.casefold() == needle]
     if len(lenses) > 1 and not exact:
@@ -303,7 +311,9 @@ def _entry_by_name(
             f"--lens {text!r} at {focal:g} mm has {len(at_focal)} calibrations: {places}; "
             "choose one with --entry FILE:LINE"
         )
-    return at_focal[0]
+    found = at_focal[0]
+    click.echo(f"lensaudit project: {found.lens} at {found.focal:g} mm, from {label}", err=True)
+    return found
 
 
 #: What a .npy file starts with (NumPy's format documentation).

@@ -35,8 +35,10 @@ def report(
 ) -> None:
     """Write tables, figures and a self-contained HTML report into DIR.
 
-    PATH is a database directory (every *.xml in it) or XML files. Without
-    PATH, the database bundled with lensfunpy is audited.
+    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    (its data/db) or XML files. Without PATH: the database of the Lensfun
+    checkout around the working directory, else the one bundled with
+    lensfunpy.
 
     \b
     DIR receives:
@@ -78,6 +80,7 @@ def report(
     except OSError as error:
         fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
     summary = audits.distortion.summary
+    click.echo(f"lensaudit report: {audits.distortion.source.label}")
     click.echo(
         f"{summary.entries} entries audited, {summary.total.finite} with a finite "
         f"r_max, {len(summary.folding)} folding inside their image."

@@ -31,9 +31,9 @@ def scan(
     """Compute r_max for every distortion entry of a Lensfun database.
 
     PATH is a database directory (every *.xml in it), a Lensfun checkout
-    (its data/db) or XML files. Without PATH, the database of the Lensfun
-    checkout around the working directory is audited, else the one bundled
-    with lensfunpy. --kind vignetting or tca audits those models instead
+    (its data/db) or XML files. Without PATH: the database of the Lensfun
+    checkout around the working directory, else the one bundled with
+    lensfunpy. --kind vignetting or tca audits those models instead
     (see docs/vignetting.md).
 
     \b
