@@ -27,6 +27,9 @@ sentence. Errors make the check fail; warnings and notices do not.
   and ``duplicate-focal`` (a second ``<distortion>`` for the same focal
   length in one calibration) are errors, or warnings when the two are
   identical, since liblensfun then loses nothing by keeping one of them.
+- Metadata Lensfun's own CI does not check (warnings, see
+  :mod:`lensaudit.check.metadata`): ``undefined-mount``,
+  ``conflicting-calibration``, ``vignetting-starting-values``.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -83,6 +86,7 @@ from .parsing import ParsedSource, parse_sources
 from .result import (
     BAD_VALUE,
     BASELINE_UNREADABLE,
+    CONFLICTING_CALIBRATION,
     DEFAULT_MARGIN,
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
@@ -101,8 +105,10 @@ from .result import (
     SEVERITY_ERROR,
     SEVERITY_NOTICE,
     SEVERITY_WARNING,
+    UNDEFINED_MOUNT,
     UNKNOWN_MODEL,
     UNREADABLE,
+    VIGNETTING_STARTING_VALUES,
     XML_ERROR,
     CheckedFile,
     CheckError,
@@ -119,6 +125,7 @@ _fix_suggestion = fix_suggestion
 __all__ = [
     "BAD_VALUE",
     "BASELINE_UNREADABLE",
+    "CONFLICTING_CALIBRATION",
     "DEFAULT_MARGIN",
     "DUPLICATE_FOCAL",
     "DUPLICATE_LENS",
@@ -138,8 +145,10 @@ __all__ = [
     "SEVERITY_ERROR",
     "SEVERITY_NOTICE",
     "SEVERITY_WARNING",
+    "UNDEFINED_MOUNT",
     "UNKNOWN_MODEL",
     "UNREADABLE",
+    "VIGNETTING_STARTING_VALUES",
     "XML_ERROR",
     "CheckError",
     "CheckResult",

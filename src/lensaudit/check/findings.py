@@ -2,7 +2,8 @@
 match it against a baseline's (:class:`lensaudit.check.result.Identified`).
 
 Input problems and folds of the distortion entries, the vignetting and TCA
-audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`).
+audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`)
+and the metadata Lensfun's own CI does not check (:mod:`lensaudit.check.metadata`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from ..read.tables import TCA, VIGNETTING
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .matching import calibration_content, entry_content, file_identified, lens_identity
+from .metadata import conflicting_calibrations, starting_values, undefined_mounts
 from .parsing import ParsedSource, parse_sources
 from .result import (
     BAD_VALUE,
@@ -99,6 +101,8 @@ def analyse_parsed(
             add(index, item)
     for index, item in duplicate_lenses(read):
         add(index, item)
+    for index, item in undefined_mounts(read):
+        add(index, item)
     ordered.sort(key=lambda pair: pair[0])
     return files, [item for _, item in ordered]
 
@@ -107,8 +111,9 @@ def file_findings(
     read: Sequence[ParsedSource], margin: float, verbose: bool, cache: Cache | None = None
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
-    vignetting and TCA records and duplicate focal lengths (none for a file
-    with a file-level problem)."""
+    vignetting and TCA records, duplicate focal lengths, conflicting
+    calibrations and vignetting at the calibration script's starting values
+    (none for a file with a file-level problem)."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
@@ -134,6 +139,9 @@ def file_findings(
         found[index].append(item)
     for index, item in duplicate_focals(read):
         found[index].append(item)
+    for index, file in enumerate(read):
+        found[index] += conflicting_calibrations(file)
+        found[index] += starting_values(file)
     return found
 
 

@@ -37,6 +37,9 @@ NO_LENS = "no-lens"
 DUPLICATE_LENS = "duplicate-lens"
 DUPLICATE_FOCAL = "duplicate-focal"
 BASELINE_UNREADABLE = "baseline-unreadable"
+UNDEFINED_MOUNT = "undefined-mount"
+CONFLICTING_CALIBRATION = "conflicting-calibration"
+VIGNETTING_STARTING_VALUES = "vignetting-starting-values"
 
 #: Findings about a whole file.
 FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
