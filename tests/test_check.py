@@ -434,6 +434,8 @@ def test_bundled_database_counts_every_entry_and_has_no_input_errors(bundled_db)
         "vignetting-zero-in-image",
         "vignetting-low-in-image",
         "vignetting-brightens",
+        "conflicting-calibration",
+        "vignetting-starting-values",
     }
 
 

@@ -63,7 +63,7 @@ def new(result) -> list[tuple[str, int]]:
 ZERO = vignetting("-1.25")  # C(1) = -1/4
 LOW = vignetting("-0.95")  # C(1) = 1/20
 TURNING = vignetting("-0.5", "0.4")  # C'(w) = -1/2 + 4/5 w: turns at w = 5/8, C >= 27/32
-FINE = vignetting("-0.3")  # C(1) = 7/10, decreasing
+FINE = vignetting("-0.31")  # C(1) = 69/100, decreasing (not the script's -0.3 start)
 TCA_FOLD = tca("-0.2")  # folds at r = sqrt(5/3) < 1.803
 LINE = 8  # line of the first element of the first lens()
 

@@ -23,7 +23,6 @@ from ..read.records import (
 )
 from ..read.tables import KINDS, TCA, VIGNETTING
 from .inputs import Source
-from .mounts import FileMounts, file_mounts
 from .result import NOT_A_DATABASE, SEVERITY_ERROR, UNREADABLE, XML_ERROR, Finding, clip
 
 #: The finding code of each file-level status of the reader.
@@ -70,8 +69,7 @@ def lens_record(lens: Lens, index: int) -> LensRecord:
 @dataclass(eq=False)
 class ParsedSource:
     """One file as the reader read it (``tables``), and its file-level finding
-    (``problem``, None for a database that parsed), and its ``mounts``
-    (:mod:`lensaudit.check.mounts`).
+    (``problem``, None for a database that parsed).
 
     A file with a file-level problem starts its distortion rows with one that
     stands for the file; :attr:`entries` and :attr:`lens_of_entry` leave it
@@ -83,7 +81,6 @@ class ParsedSource:
     source: Source
     tables: FileTables
     problem: Finding | None = None
-    mounts: FileMounts | None = None  # None for a file that could not be read
 
     @property
     def count(self) -> int:
@@ -145,21 +142,17 @@ def parse_sources(
     """Every source read by :func:`lensaudit.read.read_contents`, on every core
     where that pays, with its vignetting and TCA rows; with a ``cache``,
     contents it has met are not parsed again. A source without data (it
-    could not be read) is a file of status ``unreadable``. The mounts of each
-    file (:func:`~lensaudit.check.mounts.file_mounts`) are read from the
-    same bytes, and kept in the same cache."""
+    could not be read) is a file of status ``unreadable``."""
     readable = [(s.data, s.display, s.path) for s in sources if s.data is not None]
     tables = iter(reader.read_contents(readable, cache, calibrations=True))
     del readable  # the bytes of files on disk are not kept once read (see below)
     parsed = []
     for source in sources:
-        mounts = None
         if source.data is None:
             found = reader.unreadable(source.display, source.path, source.error)
         else:
             found = next(tables)
-            mounts = file_mounts(source.data, found.digest, cache)
             if source.origin is None:  # only a git baseline's bytes are looked at again
                 source = replace(source, data=b"")
-        parsed.append(ParsedSource(source, found, file_finding(found, source.display), mounts))
+        parsed.append(ParsedSource(source, found, file_finding(found, source.display)))
     return parsed
