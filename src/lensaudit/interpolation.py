@@ -27,12 +27,20 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+#: The cubic Hermite basis, coefficients of 1, t, t^2, t^3: h00, h10, h01, h11.
+_H00, _H10, _H01, _H11 = (1, 0, -3, 2), (0, 1, -2, 1), (0, 0, 3, -2), (0, 0, -1, 1)
 
-def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:
-    """(index, weight) pairs: the coefficients at ``focal`` are the sum of
-    weight x the coefficients of calibration ``index``, for calibrations at
-    ``focals``, in the order liblensfun meets them (which decides between
-    equal focal lengths); empty without calibrations."""
+
+def spline_terms(
+    focals: Sequence[float], focal: float
+) -> tuple[int | None, int | None, list[tuple[int, tuple[float, ...]]]]:
+    """How liblensfun interpolates at ``focal``: (the calibration below, the
+    one above, [(index, g)]) where the coefficients at ``focal`` are the sum
+    of g(t) x focal_index / focal x the coefficients of calibration
+    ``index``, g a cubic in t = (focal - below) / (above - below) given by
+    its coefficients of 1, t, t^2, t^3. At a calibrated focal length, or
+    outside the calibrated range, one calibration with g = 1 (and focal /
+    focal_index folded into it: the weight is exactly 1)."""
     # liblensfun's four spline slots: two calibrations above the focal length
     # (slot 1 the nearest), two below (slot 2 the nearest), by f - calibrated.
     slots: list[int | None] = [None] * 4
@@ -40,7 +48,7 @@ def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:
     for index, calibrated in enumerate(focals):
         distance = focal - calibrated
         if distance == 0:
-            return [(index, 1.0)]
+            return None, None, [(index, (focal / calibrated, 0.0, 0.0, 0.0))]
         if distance < 0:
             if distance > distances[1]:
                 slots[0], distances[0] = slots[1], distances[1]
@@ -55,31 +63,46 @@ def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:
     start, end = slots[1], slots[2]
     if start is None or end is None:
         side = start if start is not None else end
-        return [] if side is None else [(side, 1.0)]
-    t = (focal - focals[start]) / (focals[end] - focals[start])
-    t2, t3 = t * t, t * t * t
-    found: dict[int, float] = {}
+        return None, None, [] if side is None else [(side, (focal / focals[side], 0.0, 0.0, 0.0))]
+    found: dict[int, list[float]] = {}
 
-    def add(index: int, weight: float) -> None:
-        # The spline runs through the values k x focal, divided by f after.
-        found[index] = found.get(index, 0.0) + weight * focals[index] / focal
+    def add(index: int, basis: tuple[int, ...], scale: float) -> None:
+        total = found.setdefault(index, [0.0] * 4)
+        for power, value in enumerate(basis):
+            total[power] += scale * value
 
-    add(start, 2 * t3 - 3 * t2 + 1)
-    add(end, -2 * t3 + 3 * t2)
-    for slot, end_weight in ((0, t3 - 2 * t2 + t), (3, t3 - t2)):
+    # The spline runs from the calibration above (t = 0) to the one below (t = 1).
+    add(start, _H00, 1.0)
+    add(end, _H01, 1.0)
+    for slot, basis in ((0, _H10), (3, _H11)):
         # Tangents: half the difference of the neighbours either side, or
         # the difference of the two ends where a neighbour is missing.
         outer = slots[slot]
         if outer is None:
-            add(end, end_weight)
-            add(start, -end_weight)
+            add(end, basis, 1.0)
+            add(start, basis, -1.0)
         elif slot == 0:
-            add(end, end_weight / 2)
-            add(outer, -end_weight / 2)
+            add(end, basis, 0.5)
+            add(outer, basis, -0.5)
         else:
-            add(outer, end_weight / 2)
-            add(start, -end_weight / 2)
-    return sorted(found.items())
+            add(outer, basis, 0.5)
+            add(start, basis, -0.5)
+    return start, end, sorted((index, tuple(g)) for index, g in found.items())
+
+
+def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:
+    """(index, weight) pairs: the coefficients at ``focal`` are the sum of
+    weight x the coefficients of calibration ``index``, for calibrations at
+    ``focals``, in the order liblensfun meets them (which decides between
+    equal focal lengths); empty without calibrations."""
+    start, end, terms = spline_terms(focals, focal)
+    if start is None or end is None:
+        return [(index, 1.0) for index, _ in terms]
+    t = (focal - focals[start]) / (focals[end] - focals[start])
+    return [
+        (index, (g[0] + t * (g[1] + t * (g[2] + t * g[3]))) * focals[index] / focal)
+        for index, g in terms
+    ]
 
 
 def interpolated(

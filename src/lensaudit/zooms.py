@@ -30,6 +30,7 @@ from numpy.polynomial import polynomial as P
 from . import metrics, refit
 from .interpolation import weights
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK
+from .solver.kernel import entry_metrics
 
 # typing only for type checkers
 TYPE_CHECKING = False
@@ -298,3 +299,169 @@ class _JointProgram:
             np.vstack([slope_rows, reach_row]),
             np.concatenate([old_slope - floor, [old_reach - needed]]),
         )
+
+
+# ---------------------------------------------------------------------------
+# Between calibrated focal lengths, proven: interval arithmetic
+# ---------------------------------------------------------------------------
+
+#: How far a box of focal lengths is halved before it is left undecided.
+_MAX_DEPTH = 16
+#: Radii boxes from the centre to the radius checked, per box of focal lengths.
+_RADIUS_BOXES = 32
+#: Rounding allowance, relative to the size of the terms (far above the few
+#: units in the last place a few dozen operations can lose).
+_ROUNDING = 1e-12
+CLEAR, FOLDS, UNDECIDED = "clear", "folds", "undecided"
+
+
+@dataclass(frozen=True)
+class Between:
+    """What liblensfun's model does between two neighbouring calibrated focal
+    lengths ``low`` and ``high`` of a lens, judged against ``threshold`` x
+    the image radius: ``verdict`` ``clear`` (proven: at every focal length
+    in between, D increases until it reaches that radius), ``folds`` (at
+    ``focal``, where the model's r_normalized is ``r_normalized``, below
+    the threshold) or ``undecided``."""
+
+    low: float
+    high: float
+    verdict: str
+    focal: float = math.nan
+    r_normalized: float = math.nan
+
+
+def between(
+    calibrations: CalibrationSet,
+    coefficients: Sequence[Sequence[float]],
+    threshold: float = 1.0,
+) -> list[Between]:
+    """Every interval between neighbouring calibrated focal lengths of a lens,
+    judged for every focal length in it (not a sample of them): where the
+    interpolated coefficients are Q(t) / f with Q cubic in t, a box of focal
+    lengths is clear when, with interval arithmetic (rounding allowed for),
+    f D'(r) > 0 for r from 0 to a radius R where f (D(R) - threshold x the
+    image radius) > 0; boxes that are not are halved, and a focal length
+    whose model folds below the threshold (by the exact solver) is a
+    witness."""
+    focals = sorted(set(calibrations.focals))
+    table = np.asarray(coefficients, dtype=np.float64)
+    found = []
+    for low, high in zip(focals, focals[1:], strict=False):
+        found.append(_judge_interval(calibrations, table, low, high, threshold))
+    return found
+
+
+def _judge_interval(
+    calibrations: CalibrationSet, table: np.ndarray, low: float, high: float, threshold: float
+) -> Between:
+    from .interpolation import spline_terms
+
+    start, end, terms = spline_terms(calibrations.focals, (low + high) / 2)
+    assert start is not None and end is not None
+    f0, f1 = calibrations.focals[start], calibrations.focals[end]
+    # f x coefficient i = Q_i(t): one row of cubic coefficients (of 1, t, t^2, t^3) per i.
+    q = sum(np.outer(table[k] * calibrations.focals[k], g) for k, g in terms)
+    model = calibrations.model
+    terms_r = refit.term_matrix(model)
+    slopes_r = np.array([P.polyder(row) for row in terms_r])
+    reach = threshold * calibrations.image_radius
+    boxes = [(0.0, 1.0, 0)]
+    while boxes:
+        t_low, t_high, depth = boxes.pop()
+        middle = (t_low + t_high) / 2
+        focal = f0 + middle * (f1 - f0)
+        row = np.array([[np.polyval(q[i][::-1], middle) / focal for i in range(len(q))]])
+        value = _r_normalized(model, row[0], calibrations)
+        if value < threshold:
+            return Between(low, high, FOLDS, focal, value)
+        radius = _radius_to_check(model, row[0], reach, value / threshold)
+        if radius is not None and _clear(q, (t_low, t_high), (f0, f1), terms_r, slopes_r,
+                                         radius, reach):  # fmt: skip
+            continue
+        if depth >= _MAX_DEPTH:
+            return Between(low, high, UNDECIDED, focal, value)
+        boxes += [(t_low, middle, depth + 1), (middle, t_high, depth + 1)]
+    return Between(low, high, CLEAR)
+
+
+def _r_normalized(model: str, coefficients: np.ndarray, calibrations: CalibrationSet) -> float:
+    """r_normalized of one model over the set's image: by the solver's scalar
+    kernel, or its array code where the kernel leaves it to that."""
+    values = dict(zip(MODEL_COEFFICIENTS[model], coefficients.tolist(), strict=True))
+    found = entry_metrics(
+        model, *(values.get(n, math.nan) for n in ("a", "b", "c", "k1", "k2")),
+        1.0, calibrations.aspect_ratio, 1.0, False,
+    )  # fmt: skip
+    if found is None:
+        row = np.asarray([coefficients])
+        return float(r_normalized_at(model, row, calibrations.aspect_ratio,
+                                     calibrations.image_radius)[0])  # fmt: skip
+    return found[1] / calibrations.image_radius
+
+
+def _radius_to_check(
+    model: str, coefficients: np.ndarray, reach: float, ratio: float
+) -> float | None:
+    """A radius where the model at a box's middle is past ``reach``, halfway to
+    its d_max (or 5% past where it never folds), before it folds; None if none."""
+    curve = refit.distortion_polynomial(model, coefficients)
+    aim = reach * (1 + (min(ratio, 1.1) - 1) / 2) if math.isfinite(ratio) else reach * 1.05
+    roots = [
+        z.real for z in P.polyroots(P.polysub(curve, [aim]))
+        if abs(z.imag) <= 1e-9 * max(1.0, abs(z)) and z.real > 0
+    ]  # fmt: skip
+    return min(roots) if roots else None
+
+
+def _interval_polynomial(
+    coefficients: np.ndarray, low: np.ndarray | float, high: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lower, upper, size) of a polynomial (coefficients of 1, x, ...) over x in
+    [low, high], by Horner's rule in interval arithmetic; ``size`` bounds
+    the magnitude of every partial result (for the rounding allowance)."""
+    low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+    lower = upper = np.full(np.broadcast(low, high).shape, float(coefficients[-1]))
+    size = np.abs(lower)
+    scale = np.maximum(np.abs(low), np.abs(high))
+    for coefficient in coefficients[-2::-1]:
+        products = (lower * low, lower * high, upper * low, upper * high)
+        lower = np.minimum.reduce(products) + coefficient
+        upper = np.maximum.reduce(products) + coefficient
+        size = size * scale + abs(coefficient)
+    return lower, upper, size
+
+
+def _clear(
+    q: np.ndarray,
+    t_box: tuple[float, float],
+    ends: tuple[float, float],
+    terms_r: np.ndarray,
+    slopes_r: np.ndarray,
+    radius: float,
+    reach: float,
+) -> bool:
+    """Whether, for every t in ``t_box``: f D'(r) > 0 for r in [0, radius] and
+    f D(radius) > f reach (f = ends[0] + t (ends[1] - ends[0]))."""
+    t_low, t_high = t_box
+    f_a, f_b = ends[0] + t_low * (ends[1] - ends[0]), ends[0] + t_high * (ends[1] - ends[0])
+    f_low, f_high = min(f_a, f_b), max(f_a, f_b)
+    q_parts = [_interval_polynomial(row, t_low, t_high) for row in q]
+    # f (D(R) - reach) = f (R - reach) + sum_i Q_i(t) term_i(R)
+    lower = min(f_low * (radius - reach), f_high * (radius - reach))
+    size = f_high * (radius + reach)
+    for (q_low, q_high, q_size), term in zip(q_parts, terms_r, strict=True):
+        value = float(np.polynomial.polynomial.polyval(radius, term))
+        lower = lower + min(q_low * value, q_high * value)
+        size = size + q_size * abs(value)
+    if not lower - _ROUNDING * size > 0:
+        return False
+    # f D'(r) = f + sum_i Q_i(t) s_i(r), on boxes of r from 0 to R.
+    edges = np.linspace(0.0, radius, _RADIUS_BOXES + 1)
+    lower, size = np.full(_RADIUS_BOXES, f_low), np.full(_RADIUS_BOXES, f_high)
+    for (q_low, q_high, q_size), slope in zip(q_parts, slopes_r, strict=True):
+        s_low, s_high, s_size = _interval_polynomial(slope, edges[:-1], edges[1:])
+        products = (q_low * s_low, q_low * s_high, q_high * s_low, q_high * s_high)
+        lower = lower + np.minimum.reduce(products)
+        size = size + q_size * s_size
+    return bool(np.all(lower - _ROUNDING * size > 0))
