@@ -115,3 +115,29 @@ def lensfun_head(tmp_path_factory) -> Path:
     except (OSError, subprocess.CalledProcessError) as error:
         pytest.skip(f"cannot clone the Lensfun history bundle: {error}")
     return clone / "data" / "db"
+
+
+#: A one-lens database whose poly3 entry folds inside its image (line 10).
+FOLDING_LENS = lens_xml('<distortion model="poly3" focal="16" k1="-0.11"/>')
+
+
+@pytest.fixture
+def folding_db(tmp_path: Path) -> Path:
+    """A database directory holding :data:`FOLDING_LENS` as a.xml."""
+    directory = tmp_path / "db"
+    directory.mkdir()
+    (directory / "a.xml").write_text(FOLDING_LENS)
+    return directory
+
+
+def git_repository(path: Path, files: dict[str, str]) -> Path:
+    """A git repository at ``path`` with one commit of ``files`` (name -> text)."""
+    import subprocess
+
+    for name, text in files.items():
+        (path / name).parent.mkdir(parents=True, exist_ok=True)
+        (path / name).write_text(text)
+    environment = {**os.environ, **GIT_ENVIRONMENT}
+    for words in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
+        subprocess.run(["git", "-C", str(path), *words], check=True, env=environment)
+    return path

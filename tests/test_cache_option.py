@@ -13,20 +13,15 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conftest import lens_xml
+from conftest import FOLDING_LENS, git_repository
 from lensaudit.cli import main
 
-FOLDING = lens_xml('<distortion model="poly3" focal="16" k1="-0.11"/>')
-GIT = dict(os.environ, GIT_AUTHOR_NAME="a", GIT_AUTHOR_EMAIL="a@b", GIT_COMMITTER_NAME="a",
-           GIT_COMMITTER_EMAIL="a@b", GIT_CONFIG_GLOBAL=os.devnull)  # fmt: skip
+FOLDING = FOLDING_LENS
 
 
 @pytest.fixture
-def db(tmp_path) -> Path:
-    directory = tmp_path / "db"
-    directory.mkdir()
-    (directory / "a.xml").write_text(FOLDING)
-    return directory
+def db(folding_db) -> Path:
+    return folding_db
 
 
 def records(directory: Path) -> list[str]:
@@ -70,11 +65,7 @@ def test_the_plain_scan_reads_cache_dir_as_click_does(db, tmp_path):
 
 
 def test_history_takes_the_same_options(tmp_path):
-    repository = tmp_path / "repo"
-    (repository / "data" / "db").mkdir(parents=True)
-    (repository / "data" / "db" / "a.xml").write_text(FOLDING)
-    for words in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
-        subprocess.run(["git", "-C", repository, *words], check=True, env=GIT)
+    repository = git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING})
     cache = tmp_path / "named"
     out = tmp_path / "out"
     result = CliRunner().invoke(

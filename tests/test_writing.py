@@ -18,13 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from conftest import lens_xml
+from conftest import FOLDING_LENS, git_repository
 from lensaudit import writing
 from lensaudit.console import dispatch
 
-FOLDING = lens_xml('<distortion model="poly3" focal="16" k1="-0.11"/>')
-GIT = dict(os.environ, GIT_AUTHOR_NAME="a", GIT_AUTHOR_EMAIL="a@b", GIT_COMMITTER_NAME="a",
-           GIT_COMMITTER_EMAIL="a@b", GIT_CONFIG_GLOBAL=os.devnull)  # fmt: skip
+FOLDING = FOLDING_LENS
 BUNDLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "lensfun-db-history.bundle"
 
 
@@ -34,11 +32,8 @@ def run(capsys, *words) -> tuple[int, str]:
 
 
 @pytest.fixture
-def db(tmp_path) -> Path:
-    directory = tmp_path / "db"
-    directory.mkdir()
-    (directory / "a.xml").write_text(FOLDING)
-    return directory
+def db(folding_db) -> Path:
+    return folding_db
 
 
 def refused(capsys, db: Path, *words) -> str:
@@ -95,11 +90,7 @@ def test_check_refuses_to_write_into_its_baseline_directory(capsys, db, tmp_path
 
 
 def test_history_refuses_to_write_into_the_database_it_reads(capsys, tmp_path):
-    repository = tmp_path / "repo"
-    (repository / "data" / "db").mkdir(parents=True)
-    (repository / "data" / "db" / "a.xml").write_text(FOLDING)
-    for words in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
-        subprocess.run(["git", "-C", repository, *words], check=True, env=GIT)
+    repository = git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING})
     for inside in (repository / "data" / "db", repository / ".git" / "out"):
         code, err = run(capsys, "history", repository, "-o", inside, "--no-cache", "-q")
         assert code == 2 and "nothing read or written" in err
@@ -173,11 +164,7 @@ def test_a_history_that_fails_half_way_writes_nothing(capsys, tmp_path, monkeypa
         raise writing.WriteError(f"cannot write {path}: disk full", "disk full")
 
     monkeypatch.setattr(writing.OutputSet, "write_bytes", fail_on_figures)
-    repository = tmp_path / "repo"
-    (repository / "data" / "db").mkdir(parents=True)
-    (repository / "data" / "db" / "a.xml").write_text(FOLDING)
-    for words in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
-        subprocess.run(["git", "-C", repository, *words], check=True, env=GIT)
+    repository = git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING})
     out = tmp_path / "out"
     code, err = run(capsys, "history", repository, "-o", out, "--no-cache", "-q")
     assert command is not None and written and real is not None
