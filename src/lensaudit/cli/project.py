@@ -250,28 +250,28 @@ def _entry_at(text: str) -> DistortionEntry:
     if not sep or not line_text.isdigit():
         fail(f"--entry {text!r}: expected FILE:LINE, e.g. slr-tokina.xml:17")
     path = Path(name)
-    where = display_path(path)
+    line = int(line_text)
+    where = f"{display_path(path)}:{line}"
     if not path.is_file():
         try:
             source = read.resolve(None)
         except LoadError as error:
             fail(f"--entry {text!r}: no such file {name!r}, and no default database: {error}")
         path = source.paths[0] / name
-        where = f"{name} in {source.label}"
+        where = f"{name}:{line} in {source.label}"
         if not path.is_file():
             fail(f"--entry {text!r}: no such file {name!r}, nor in {source.label}")
-    line = int(line_text)
     entries = read.read([path]).entries()
     matches = [e for e in entries if e.line == line]
     if not matches:
         lines = ", ".join(str(e.line) for e in entries[:8] if e.line)
         fail(
-            f"{where}:{line}: no <distortion> element starts on that line"
+            f"{where}: no <distortion> element starts on that line"
             + (f" (entries start on lines {lines}, ...)" if lines else "")
         )
     found = matches[0]
     if found.status != STATUS_OK:
-        fail(f"{where}:{line}: entry cannot be used ({found.status}: {found.message})")
+        fail(f"{where}: entry cannot be used ({found.status}: {found.message})")
     click.echo(f"lensaudit project: {found.lens} at {found.focal:g} mm, from {where}", err=True)
     return found
 
