@@ -580,7 +580,7 @@ def test_cli_projects_csv_points_with_an_entry(runner, poly3_xml):
         main, ["project", "-", "--entry", f"{poly3_xml}:10", "--size", "600x400"], input=points
     )
     assert result.exit_code == 0, result.output
-    out = rows(result.output)
+    out = rows(result.stdout)
     assert [r["valid"] for r in out] == ["true", "true", "true", "false", "false"]
     assert (float(out[0]["u"]), float(out[0]["v"])) == (299.5, 199.5)
     assert out[3]["u"] == "" and out[3]["v"] == ""
@@ -598,7 +598,7 @@ def test_cli_reads_npy_and_headerless_csv(runner, poly3_xml, tmp_path):
             ["project", str(tmp_path / name), "--entry", f"{poly3_xml}:10", "--size", "600x400"],
         )
         assert result.exit_code == 0, result.output
-        assert [r["valid"] for r in rows(result.output)] == ["true", "false"]
+        assert [r["valid"] for r in rows(result.stdout)] == ["true", "false"]
 
 
 def test_cli_finds_a_lens_by_name_and_focal(runner, tmp_path):
@@ -619,7 +619,7 @@ def test_cli_finds_a_lens_by_name_and_focal(runner, tmp_path):
         ],
     )
     assert result.exit_code == 0, result.output
-    assert [r["valid"] for r in rows(result.output)] == ["true", "false"]
+    assert [r["valid"] for r in rows(result.stdout)] == ["true", "false"]
 
 
 def test_cli_info_reports_r_max_and_the_fold(runner):
