@@ -1,6 +1,6 @@
 """`lensaudit check`: metadata Lensfun's own CI does not check (issue 24, item 5):
-conflicting calibrations, vignetting at the calibration script's starting
-values. Both are warnings: they never fail a check."""
+undefined mounts, conflicting calibrations, vignetting at the calibration
+script's starting values. All three are warnings: they never fail a check."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ import pytest
 from click.testing import CliRunner
 
 from lensaudit.check import check
+from lensaudit.check.metadata import is_fixed_lens_mount, mount_key
 from lensaudit.cli import main
 
 MOUNTS = "  <mount><name>Pentax K</name></mount>\n  <mount><name>Canon EF</name></mount>\n"
-NEW_CODES = ("conflicting-calibration", "vignetting-starting-values")
+NEW_CODES = ("undefined-mount", "conflicting-calibration", "vignetting-starting-values")
 
 
 def lens(model: str, *elements: str, mount: str = "Pentax K", crop: str = "1") -> str:
@@ -58,6 +59,57 @@ def vignetting(k1: str, k2: str = "0", k3: str = "0", focal: str = "50", apertur
         f'<vignetting model="pa" focal="{focal}" aperture="{aperture}" distance="10" '
         f'k1="{k1}" k2="{k2}" k3="{k3}"/>'
     )
+
+
+# -- undefined-mount ------------------------------------------------------------
+
+
+def test_a_lens_of_a_mount_defined_nowhere_is_a_warning_on_its_mount_line(tmp_path):
+    result = check(database(tmp_path / "db", lens("50mm", mount="Pentak K")))
+    assert found(result) == [("warning", "undefined-mount", 7)]  # the <mount> element's line
+    assert '"Pentak K"' in result.findings[0].message
+    assert 'did you mean "Pentax K"' in result.findings[0].message
+    assert not result.failed
+
+
+def test_a_camera_of_a_mount_defined_nowhere_is_a_warning(tmp_path):
+    result = check(database(tmp_path / "db", camera("Body", "Fujifilm G")))
+    assert found(result) == [("warning", "undefined-mount", 7)]
+    assert result.findings[0].message.startswith("camera Test Body")
+
+
+def test_mount_names_compare_as_liblensfun_compares_them(tmp_path):
+    result = check(database(tmp_path / "db", lens("50mm", mount="  pentax   k "), lens("85mm")))
+    assert found(result) == []
+    assert mount_key(" Canon\tEF ") == mount_key("canon ef")
+
+
+def test_a_fixed_lens_cameras_own_mount_is_never_reported(tmp_path):
+    result = check(
+        database(tmp_path / "db", camera("Compact", "canonG3"), lens("Std", mount="canonG3"))
+    )
+    assert found(result) == []
+    assert is_fixed_lens_mount("canonG3") and not is_fixed_lens_mount("Canon EF")
+
+
+def test_a_mount_defined_in_another_file_counts(tmp_path):
+    directory = database(tmp_path / "db", lens("50mm", mount="Sony E"))
+    (directory / "mounts.xml").write_text(
+        '<lensdatabase version="2"><mount><name>Sony E</name></mount></lensdatabase>'
+    )
+    assert found(check(directory)) == []
+
+
+def test_files_that_define_no_mount_are_a_fragment_and_give_no_mount_finding(tmp_path):
+    result = check(database(tmp_path / "db", lens("50mm", mount="Pentak K"), mounts=""))
+    assert found(result) == []
+
+
+def test_a_known_undefined_mount_stays_known_when_lines_move(tmp_path):
+    before = database(tmp_path / "before", lens("50mm", mount="Pentak K"))
+    after = database(tmp_path / "after", lens("35mm"), lens("50mm", mount="Pentak K"))
+    result = check(after, baseline=before)
+    assert [f.known for f in result.findings if f.code == "undefined-mount"] == [True]
 
 
 # -- conflicting-calibration -------------------------------------------------------
@@ -149,9 +201,10 @@ def test_a_known_starting_value_entry_is_known_from_the_baseline(tmp_path):
 # -- through the command line ---------------------------------------------------------
 
 
-def test_the_command_line_reports_both_and_exits_0(tmp_path):
+def test_the_command_line_reports_all_three_and_exits_0(tmp_path):
     directory = database(
-        tmp_path / "db", lens("50mm", tca("50"), tca("50", vr="1.0003"), vignetting("-0.3"))
+        tmp_path / "db",
+        lens("50mm", tca("50"), tca("50", vr="1.0003"), vignetting("-0.3"), mount="Pentak K"),
     )
     result = CliRunner().invoke(main, ["check", str(directory), "--format", "json"])
     assert result.exit_code == 0, result.output
@@ -160,13 +213,13 @@ def test_the_command_line_reports_both_and_exits_0(tmp_path):
 
 
 def test_a_baseline_that_has_the_findings_makes_them_known_on_the_command_line(tmp_path):
-    part = lens("50mm", tca("50"), tca("50", vr="1.0003"), vignetting("-0.3"))
+    part = lens("50mm", tca("50"), tca("50", vr="1.0003"), vignetting("-0.3"), mount="Pentak K")
     before = database(tmp_path / "before", part)
     after = database(tmp_path / "after", lens("35mm"), part)
     result = CliRunner().invoke(main, ["check", str(after), "--baseline", str(before)])
     assert result.exit_code == 0, result.output
     assert result.output.rstrip().endswith(
-        "0 errors, 0 warnings; 2 known from baseline " + str(before) + ", 0 resolved"
+        "0 errors, 0 warnings; 3 known from baseline " + str(before) + ", 0 resolved"
     )
 
 
@@ -190,9 +243,10 @@ def counts(directory: Path) -> Counter:
 
 
 def test_the_counts_at_lensfun_master_are_the_independent_counts(lensfun_head):
-    # Issue 24: 25 lenses with conflicting TCA, 2 with conflicting distortion
-    # (both duplicate-focal errors), 9 starting-value entries.
+    # Issue 24: 8 undefined mounts, 25 lenses with conflicting TCA, 2 with
+    # conflicting distortion (both duplicate-focal errors), 9 starting-value entries.
     tally = counts(lensfun_head)
+    assert tally["undefined-mount"] == 8
     assert tally["tca lenses"] == 25
     assert tally["conflicting-calibration"] == 89  # TCA entries, in those 25 lenses
     assert tally["distortion lenses"] == 2
@@ -201,6 +255,7 @@ def test_the_counts_at_lensfun_master_are_the_independent_counts(lensfun_head):
 
 def test_the_counts_on_the_bundled_database(bundled_db):
     tally = counts(bundled_db)
+    assert tally["undefined-mount"] == 10  # "Fujifilm G" is defined only later
     assert (tally["tca lenses"], tally["conflicting-calibration"]) == (25, 89)
     assert tally["distortion lenses"] == 1
     assert tally["vignetting-starting-values"] == 5

@@ -28,8 +28,8 @@ sentence. Errors make the check fail; warnings and notices do not.
   length in one calibration) are errors, or warnings when the two are
   identical, since liblensfun then loses nothing by keeping one of them.
 - Metadata Lensfun's own CI does not check (warnings, see
-  :mod:`lensaudit.check.metadata`): ``conflicting-calibration``,
-  ``vignetting-starting-values``.
+  :mod:`lensaudit.check.metadata`): ``undefined-mount``,
+  ``conflicting-calibration``, ``vignetting-starting-values``.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -105,6 +105,7 @@ from .result import (
     SEVERITY_ERROR,
     SEVERITY_NOTICE,
     SEVERITY_WARNING,
+    UNDEFINED_MOUNT,
     UNKNOWN_MODEL,
     UNREADABLE,
     VIGNETTING_STARTING_VALUES,
@@ -144,6 +145,7 @@ __all__ = [
     "SEVERITY_ERROR",
     "SEVERITY_NOTICE",
     "SEVERITY_WARNING",
+    "UNDEFINED_MOUNT",
     "UNKNOWN_MODEL",
     "UNREADABLE",
     "VIGNETTING_STARTING_VALUES",

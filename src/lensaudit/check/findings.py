@@ -30,7 +30,7 @@ from ..read.tables import TCA, VIGNETTING
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .matching import calibration_content, entry_content, file_identified, lens_identity
-from .metadata import conflicting_calibrations, starting_values
+from .metadata import conflicting_calibrations, starting_values, undefined_mounts
 from .parsing import ParsedSource, parse_sources
 from .result import (
     BAD_VALUE,
@@ -100,6 +100,8 @@ def analyse_parsed(
         for item in items:
             add(index, item)
     for index, item in duplicate_lenses(read):
+        add(index, item)
+    for index, item in undefined_mounts(read):
         add(index, item)
     ordered.sort(key=lambda pair: pair[0])
     return files, [item for _, item in ordered]

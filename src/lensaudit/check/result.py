@@ -37,6 +37,7 @@ NO_LENS = "no-lens"
 DUPLICATE_LENS = "duplicate-lens"
 DUPLICATE_FOCAL = "duplicate-focal"
 BASELINE_UNREADABLE = "baseline-unreadable"
+UNDEFINED_MOUNT = "undefined-mount"
 CONFLICTING_CALIBRATION = "conflicting-calibration"
 VIGNETTING_STARTING_VALUES = "vignetting-starting-values"
 

@@ -237,7 +237,8 @@ def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None
             lens_of_vignetting = [None, *lens_of_vignetting]  # type: ignore[misc]
             lens_of_tca = [None, *lens_of_tca]  # type: ignore[misc]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
-              found.lenses, distortion, lens_of_row, omitted)  # fmt: skip
+              found.lenses, distortion, lens_of_row, omitted, found.cameras,
+              found.mount_names)  # fmt: skip
     if not calibrations:
         return stored, None
     return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)
@@ -254,7 +255,7 @@ def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
 def unreadable(name: str, path: Path | None, message: str) -> FileTables:
     """The tables of a file that could not be read: one row that says why."""
     values = (STATUS_UNREADABLE, 0, 0, message, message, [],
-              [error_row(0, STATUS_UNREADABLE, message)], [None], [()])  # fmt: skip
+              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [])  # fmt: skip
     tables = FileTables(name, path, b"", values)
     tables.set_calibrations(
         (

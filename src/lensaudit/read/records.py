@@ -117,6 +117,7 @@ class Lens(
             "crop_text",
             "problem",
             "content",
+            "mount_lines",
         ),
     )  # fmt: skip
 ):
@@ -126,7 +127,18 @@ class Lens(
     ``problem``, why its entries cannot be audited ("" if they can); and
     ``content``, its elements other than its untranslated names and its
     calibrations, as (tag, sorted attributes, text) triples: with its
-    calibration rows, what makes two lenses the same."""
+    calibration rows, what makes two lenses the same; ``mount_lines``, the
+    line of each of its ``<mount>`` elements, counted from its own line."""
+
+    __slots__ = ()
+
+
+class Camera(
+    namedtuple("Camera", ("line", "maker", "model", "mounts", "mount_lines", "crop_text"))
+):
+    """One top-level ``<camera>``: its line, maker and model (the untranslated
+    names), its ``<mount>`` names and their lines (counted from its own), and
+    its ``<cropfactor>`` as written (None if there is none)."""
 
     __slots__ = ()
 
@@ -142,7 +154,9 @@ class FileTables:
     stands for the file when its status is not ``ok``; ``lens_of_row`` the
     index into ``lenses`` of each distortion row (None outside a lens);
     ``omitted`` the coefficient attributes each distortion row's element
-    leaves out. ``vignetting`` and ``tca`` are their rows (see
+    leaves out. ``cameras`` are :class:`Camera` records; ``mount_names`` the
+    (line, name) of each untranslated ``<name>`` of a top-level ``<mount>``.
+    ``vignetting`` and ``tca`` are their rows (see
     :mod:`lensaudit.read.tables`), None until read; ``lens_of_vignetting`` and
     ``lens_of_tca`` the lens index of each.
 
@@ -152,14 +166,14 @@ class FileTables:
 
     __slots__ = (
         "name", "path", "digest", "status", "line", "column", "error", "problem",
-        "lenses", "distortion", "lens_of_row", "omitted", "vignetting", "tca",
-        "lens_of_vignetting", "lens_of_tca",
+        "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
+        "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
     )  # fmt: skip
 
     #: The fields that the cache keeps, in order (all but name, path and digest).
     STORED = (
         "status", "line", "column", "error", "problem",
-        "lenses", "distortion", "lens_of_row", "omitted",
+        "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
     )  # fmt: skip
 
     def __init__(self, name: str, path: object, digest: bytes, values: tuple) -> None:
@@ -168,9 +182,10 @@ class FileTables:
         self.digest = digest
         (
             self.status, self.line, self.column, self.error, self.problem,
-            lenses, self.distortion, self.lens_of_row, self.omitted,
+            lenses, self.distortion, self.lens_of_row, self.omitted, cameras, self.mount_names,
         ) = values  # fmt: skip
         self.lenses = [Lens(*lens) for lens in lenses]
+        self.cameras = [Camera(*camera) for camera in cameras]
         self.vignetting: list[tuple] | None = None
         self.tca: list[tuple] | None = None
         self.lens_of_vignetting: list[int | None] | None = None

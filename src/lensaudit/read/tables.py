@@ -98,12 +98,15 @@ _NO_LENS = LensContext(
 _NAMED = frozenset(("maker", "model", "type", "cropfactor", "aspect-ratio"))
 
 
-def read_lens(element: etree._Element, index: int, line: int) -> tuple[tuple, LensContext]:
+def read_lens(
+    element: etree._Element, index: int, line: int, line_of: LineOf
+) -> tuple[tuple, LensContext]:
     """A ``<lens>`` as a :class:`~lensaudit.read.records.Lens` row, and the
     context it gives its entries. Of each named child, the last without a
     ``lang`` attribute counts, as in liblensfun."""
     texts: dict[str, str] = {}
     mounts = []
+    mount_lines = []
     content = []
     for child in element:
         tag = child.tag
@@ -111,6 +114,7 @@ def read_lens(element: etree._Element, index: int, line: int) -> tuple[tuple, Le
             continue
         if tag == "mount":
             mounts.append(text_of(child))
+            mount_lines.append(line_of(child) - line)
         elif tag in _NAMED and child.get("lang") is None:
             texts[tag] = text_of(child)
             if tag in ("maker", "model"):
@@ -138,8 +142,32 @@ def read_lens(element: etree._Element, index: int, line: int) -> tuple[tuple, Le
     fields = (maker, model, tuple(mounts), lens_type, crop_factor, aspect_ratio)
     problem = "; ".join(problems)
     row = (line, maker, model, tuple(mounts), lens_type, crop_factor,
-           aspect_ratio, crop_text, problem, tuple(content))  # fmt: skip
+           aspect_ratio, crop_text, problem, tuple(content), tuple(mount_lines))  # fmt: skip
     return row, LensContext(fields, problem, index=index)
+
+
+def read_camera(element: etree._Element, line_of: LineOf) -> tuple:
+    """A top-level ``<camera>`` as a :class:`~lensaudit.read.records.Camera` row."""
+    line = line_of(element)
+    texts: dict[str, str] = {}
+    mounts, mount_lines = [], []
+    for child in element.iterchildren("maker", "model", "mount", "cropfactor"):
+        if child.tag == "mount":
+            mounts.append(text_of(child))
+            mount_lines.append(line_of(child) - line)
+        elif child.get("lang") is None:
+            texts[child.tag] = text_of(child)
+    return (line, texts.get("maker", ""), texts.get("model", ""), tuple(mounts),
+            tuple(mount_lines), texts.get("cropfactor"))  # fmt: skip
+
+
+def mount_names(element: etree._Element, line_of: LineOf) -> list[tuple[int, str]]:
+    """(line, name) of each untranslated ``<name>`` of a top-level ``<mount>``."""
+    return [
+        (line_of(name), text_of(name))
+        for name in element.iterchildren("name")
+        if name.get("lang") is None
+    ]
 
 
 def _positive(value: float, what: str) -> float:
@@ -202,7 +230,7 @@ def elements_in_context(
     for element in piece.iter("lens", "calibration", *tags):
         tag = element.tag
         if tag == "lens":
-            row, context = read_lens(element, first_lens + len(lenses), line_of(element))
+            row, context = read_lens(element, first_lens + len(lenses), line_of(element), line_of)
             lenses.append(row)
             contexts[element] = context
             lens, calibration, of_lens = element, None, context
@@ -512,9 +540,15 @@ class FileReader:
         self.tca: list[tuple] | None = [] if calibrations else None
         self.lens_of_vignetting: list[int | None] | None = [] if calibrations else None
         self.lens_of_tca: list[int | None] | None = [] if calibrations else None
+        self.cameras: list[tuple] = []
+        self.mount_names: list[tuple[int, str]] = []
 
     def add(self, piece: etree._Element, line_of: LineOf) -> None:
         """Read one piece of the document."""
+        if piece.tag == "camera":
+            self.cameras.append(read_camera(piece, line_of))
+        elif piece.tag == "mount":
+            self.mount_names += mount_names(piece, line_of)
         lenses, found = elements_in_context(piece, self.tags, len(self.lenses), line_of)
         self.lenses += lenses
         rows = {VIGNETTING: self.vignetting, TCA: self.tca}
