@@ -101,7 +101,11 @@ def check(
     Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
       vignetting-low-in-image (C(r) < 0.1 inside the image);
       vignetting-brightens (C(r) > 1.05 inside the image: brighter
-      than the centre, which no lens is);
+      than the centre, which no lens is); undefined-mount (a mount no
+      <mount> of the database defines); conflicting-calibration (two
+      calibrations of one lens for the same focal length, aperture and
+      distance; liblensfun uses the first); vignetting-starting-values
+      (k1=-0.3, k2=0, k3=0: the calibration script's start);
       duplicate-lens and duplicate-focal when the two are identical.
     Notices: baseline-unreadable (how a baseline file that cannot be parsed
       was replaced).
