@@ -24,6 +24,7 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
 
+from conftest import FOLDING_LENS, git_repository
 from damage import FLIPS, flipped
 from lensaudit import read
 from lensaudit.cli import main
@@ -666,7 +667,7 @@ def test_an_empty_date_range_is_refused(repo):
 # ----------------------------------------------------------------------- CLI
 
 
-def test_cli_writes_the_four_outputs(repo, tmp_path):
+def test_cli_writes_the_five_outputs(repo, tmp_path):
     out = tmp_path / "out"
     result = CliRunner().invoke(
         main, ["history", str(repo.path), "-o", str(out), "--no-cache", "-q"]
@@ -674,6 +675,7 @@ def test_cli_writes_the_four_outputs(repo, tmp_path):
     assert result.exit_code == 0, result.output
     assert result.output == ""  # quiet: no progress bar off a terminal, no summary
     assert sorted(p.name for p in out.iterdir()) == [
+        "events.csv",
         "history.csv",
         "introduced.csv",
         "trend.png",
@@ -988,3 +990,44 @@ def test_progress_reaches_every_file_version_read(repo):
     result = audit_history(repo.path, progress=lambda done, total: seen.append((done, total)))
     assert seen and seen[-1] == (result.blobs_read, result.blobs_read)
     assert [done for done, _ in seen] == sorted(done for done, _ in seen)
+
+
+# ------------------------------------------------------------------ fold events
+
+
+def test_events_name_where_a_fold_starts_and_where_it_ends(tmp_path):
+    folding = FOLDING_LENS
+    fine = folding.replace('k1="-0.11"', 'k1="-0.01"')
+    repository = git_repository(tmp_path / "repo", {"data/db/a.xml": folding})
+    (repository / "data" / "db" / "a.xml").write_text(fine)
+    _git(repository, "commit", "-qam", "fixed")
+    result = audit_history(repository)
+    events = [(e.commit.subject, e.event, e.identity[1], e.identity[4]) for e in result.events]
+    assert events == [
+        ("one", "folds", "Test 10mm", 16.0),
+        ("fixed", "no-longer-folds", "Test 10mm", 16.0),
+    ]
+    rows = list(csv.DictReader(io.StringIO(_text(result.write_events_csv))))
+    assert [r["event"] for r in rows] == ["folds", "no-longer-folds"] and rows[0]["coefficients"]
+
+
+def _text(write) -> str:
+    stream = io.StringIO()
+    write(stream)
+    return stream.getvalue()
+
+
+def test_a_warm_run_keeps_the_events(repo, tmp_path):
+    cold = audit_history(repo.path, cache=tmp_path)
+    warm = audit_history(repo.path, cache=tmp_path)
+    assert warm.blobs_read == 0 and warm.events == cold.events
+
+
+def test_the_nikkor_z_14_30_folds_from_32aa19d_until_17b336c_fixes_it(lensfun_history):
+    result = audit_history(lensfun_history)
+    nikkor = [
+        (e.commit.short, e.event, e.branch_commit.short if e.branch_commit else "")
+        for e in result.events
+        if e.identity[1] == "NIKKOR Z 14-30mm f/4 S" and e.identity[4] == 24.0
+    ]
+    assert nikkor[:2] == [("32aa19d", "folds", ""), ("79dca3c", "no-longer-folds", "17b336c")]

@@ -193,7 +193,7 @@ def test_ctrl_c_is_status_130_with_no_partial_output_and_a_valid_cache(tmp_path)
         pytest.skip(f"no Lensfun history bundle at {BUNDLE}")
     clone = tmp_path / "lensfun"
     subprocess.run(["git", "clone", "-q", "--no-checkout", BUNDLE, clone], check=True)
-    names = {"history.csv", "introduced.csv", "trend.png", "trend.svg"}
+    names = {"history.csv", "introduced.csv", "events.csv", "trend.png", "trend.svg"}
     cache = tmp_path / "cache"
     outcomes = set()
     for turn, delay in enumerate((0.8, 1.6, 2.4, 3.2)):

@@ -56,7 +56,7 @@ from .options import cache_option, fail
     required=True,
     metavar="DIR",
     type=click.Path(path_type=Path, file_okay=False),
-    help="Directory for history.csv, introduced.csv, trend.png and trend.svg.",
+    help="Directory for history.csv, introduced.csv, events.csv, trend.png and trend.svg.",
 )
 @cache_option
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
@@ -85,6 +85,8 @@ def history(
       history.csv     one row per commit that changes the database
       introduced.csv  each entry of the newest revision with a finite r_max,
                       and the commit that introduced its coefficients
+      events.csv      along the first-parent line, each entry that starts
+                      folding inside its image and each that stops, and where
       trend.png/.svg  entries, share with finite r_max and folds over time,
                       the paper's snapshot (2021-05-30) marked
 
@@ -156,11 +158,12 @@ class _ProgressBar:
 
 
 def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
-    """Write history.csv, introduced.csv and the trend figures: all, or none."""
+    """Write history.csv, introduced.csv, events.csv and the trend figures: all, or none."""
     contents: dict[str, str | bytes] = {}
     for name, write in (
         ("history.csv", result.write_csv),
         ("introduced.csv", result.write_introduced_csv),
+        ("events.csv", result.write_events_csv),
     ):
         stream = io.StringIO()
         write(stream)

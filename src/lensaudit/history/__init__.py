@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import read
 from ..pipeline import Audit, audit_database, file_metrics
-from . import blobs, commits, introduced, versions
+from . import blobs, commits, events, introduced, versions
 from .audit import Interner
 from .commits import Commit, HistoryError
 from .index import Index, audits_kept, caches, history_data, history_from_data, keep_audits
@@ -135,8 +135,11 @@ def audit_history(
         git, tip, filters, first_parent, revision, db_path
     )
     # 2. Each file version read once; 3. the revisions, and who introduced what.
-    newest = next(c for c in selected if c.hash == mainline[0])
-    full, audits, reused = _read_versions(git, files, files[newest.hash], (store, index), progress)
+    by_hash = {c.hash: c for c in selected}
+    newest = by_hash[mainline[0]]
+    full, audits, reused, identities = _read_versions(
+        git, files, files[newest.hash], (store, index), progress
+    )
     states, revisions = introduced.walk(
         selected, outside, files, first_parent, set(mainline), audits
     )
@@ -158,10 +161,34 @@ def audit_history(
         blobs_reused=reused,
         seconds=time.perf_counter() - started,
         warnings=warnings,
+        events=_events(git, mainline, by_hash, files, audits, identities),
     )
     if index is not None:
         index.put("run", run_key, history_data(result))
     return result
+
+
+def _events(
+    git: commits.Git,
+    mainline: list[str],
+    by_hash: dict[str, Commit],
+    files: dict[str, dict[str, str]],
+    audits: dict[str, Any],
+    identities: list,
+) -> list:
+    """Where entries start and stop folding along the first-parent line."""
+    line = [by_hash[h] for h in reversed(mainline)]
+    return events.fold_events(
+        line, files, audits, identities, lambda merge: _merged(git, merge, by_hash)
+    )
+
+
+def _merged(git: commits.Git, merge: Commit, by_hash: dict[str, Commit]) -> list[Commit]:
+    """The selected commits a merge brings in, oldest first."""
+    hashes = git.run(
+        "rev-list", "--reverse", "--topo-order", merge.parents[1], f"^{merge.parents[0]}"
+    )
+    return [by_hash[h] for h in hashes.split() if h in by_hash]
 
 
 def _commits(
@@ -208,12 +235,13 @@ def _read_versions(
     newest_files: dict[str, str],
     kept_in: tuple[read.Cache | None, Index | None],
     progress: Callable[[int, int], None] | None,
-) -> tuple[dict[str, tuple[read.FileTables, dict[str, list]]], dict[str, Any], int]:
+) -> tuple[dict[str, tuple[read.FileTables, dict[str, list]]], dict[str, Any], int, list]:
     """Each file version read once: the newest revision's in full, through the
     one cache (its entries are reported), the others taken from the index's
     audits of the last run, or read and summarized on every core. (The
     newest files' tables and metrics by blob, the audit of every version by
-    blob, and how many were taken from the index.)"""
+    blob, how many were taken from the index, and the identities the
+    audits' numbers stand for.)"""
     store, index = kept_in
     every_blob = sorted({blob for m in files.values() for blob in m.values()})
     names = {blob: name for m in files.values() for name, blob in m.items()}
@@ -236,7 +264,7 @@ def _read_versions(
     audits = {blob: audits[blob] for blob in every_blob}
     if index is not None:
         keep_audits(index, interner, audits)
-    return full, audits, len(reused)
+    return full, audits, len(reused), interner.values
 
 
 def _read_in_full(

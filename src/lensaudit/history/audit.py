@@ -18,6 +18,7 @@ class BlobAudit:
     error: str
     counts: tuple[int, ...]
     idents: tuple[int, ...]
+    folding: tuple[int, ...] = ()  # the identities of the entries that fold in their image
 
 
 class Interner:
@@ -36,7 +37,10 @@ class Interner:
 
     def audit(self, summary: Summary) -> BlobAudit:
         """A file version's summary, its identities interned."""
-        return BlobAudit(summary.error, summary.counts, tuple(map(self, summary.identities)))
+        idents = tuple(map(self, summary.identities))
+        return BlobAudit(
+            summary.error, summary.counts, idents, tuple(idents[i] for i in summary.folding)
+        )
 
 
 def revision(

@@ -32,7 +32,7 @@ from .. import read
 from ..read.records import DistortionEntry
 from .audit import BlobAudit, Interner
 from .commits import Commit
-from .results import COUNT_COLUMNS, History, IntroducedEntry, Revision
+from .results import COUNT_COLUMNS, FoldEvent, History, IntroducedEntry, Revision
 
 try:  # BLAKE2 alone, as the one cache: hashlib would also load OpenSSL
     from _blake2 import blake2b
@@ -159,9 +159,12 @@ def audits_kept(index: Index | None, interner: Interner) -> dict[str, BlobAudit]
         same = numbers == list(range(len(numbers)))  # a new interner: numbers kept as they are
         found = {
             blob: BlobAudit(
-                error, tuple(counts), idents if same else tuple(numbers[i] for i in idents)
+                error,
+                tuple(counts),
+                idents if same else tuple(numbers[i] for i in idents),
+                folding if same else tuple(numbers[i] for i in folding),
             )
-            for blob, (error, counts, idents) in kept.items()
+            for blob, (error, counts, idents, folding) in kept.items()
         }
     except (TypeError, ValueError, IndexError, AttributeError):
         return {}
@@ -173,7 +176,10 @@ def audits_kept(index: Index | None, interner: Interner) -> dict[str, BlobAudit]
 def keep_audits(index: Index, interner: Interner, audits: dict[str, BlobAudit]) -> None:
     """Keep the audits of a run's file versions (by blob), their identities
     interned by ``interner``, in the index in place of the last run's."""
-    kept = {blob: (audit.error, audit.counts, audit.idents) for blob, audit in audits.items()}
+    kept = {
+        blob: (audit.error, audit.counts, audit.idents, audit.folding)
+        for blob, audit in audits.items()
+    }
     index.put("versions", _VERSIONS_KEY, (interner.values, kept))
 
 
@@ -205,13 +211,17 @@ def history_data(history: History) -> tuple:
         ],
         history.commits,
         history.blobs,
+        [
+            (_commit_data(e.commit), e.event, e.identity, _commit_data(e.branch_commit))
+            for e in history.events
+        ],
     )
 
 
 def history_from_data(data: tuple) -> History:
     """The history :func:`history_data` kept (repository and timings to be filled in).
     Raises TypeError or ValueError for data of another shape."""
-    path, first_parent, revisions, newest, introduced, commits, blobs = data
+    path, first_parent, revisions, newest, introduced, commits, blobs, events = data
     commit_of: dict[tuple, Commit] = {}
 
     def commit(values: tuple | None) -> Commit | None:
@@ -242,4 +252,7 @@ def history_from_data(data: tuple) -> History:
         blobs_read=0,
         blobs_reused=blobs,
         seconds=0.0,
+        events=[
+            FoldEvent(commit(c), event, identity, commit(b)) for c, event, identity, b in events
+        ],
     )

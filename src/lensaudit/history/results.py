@@ -60,6 +60,45 @@ INTRODUCED_COLUMNS = tuple(
 ) + ("commit", "date", "author", "subject")  # fmt: skip
 
 
+#: Columns of ``events.csv``.
+EVENT_COLUMNS = (
+    "commit", "date", "author", "subject", "event", "maker", "lens", "crop_factor", "model",
+    "focal", "coefficients", "branch_commit", "branch_subject",
+)  # fmt: skip
+#: The events of :class:`FoldEvent`.
+FOLDS, NO_LONGER_FOLDS = "folds", "no-longer-folds"
+
+
+@dataclass(frozen=True)
+class FoldEvent:
+    """An entry that starts folding inside its image at a commit of the
+    first-parent line (``folds``), or stops (``no-longer-folds``: fixed,
+    changed or removed). ``identity`` is the entry's (maker, lens, crop
+    factor, model, focal, coefficients). Where ``commit`` merges a branch,
+    ``branch_commit`` is the commit of that branch where it happened (None
+    if none is found)."""
+
+    commit: Commit
+    event: str
+    identity: tuple
+    branch_commit: Commit | None = None
+
+    def record(self) -> dict[str, Any]:
+        """The row of ``events.csv`` as a dict, keys in :data:`EVENT_COLUMNS` order."""
+        maker, lens, crop, model, focal, coefficients = self.identity
+        c, b = self.commit, self.branch_commit
+        return dict(
+            zip(
+                EVENT_COLUMNS,
+                (c.short, c.date, c.author, c.subject, self.event, maker, lens, crop, model,
+                 focal, " ".join(f"{name}={value!r}" for name, value in zip(
+                     MODEL_COEFFICIENTS[model], coefficients, strict=True)),
+                 b.short if b else "", b.subject if b else ""),
+                strict=True,
+            )
+        )  # fmt: skip
+
+
 @dataclass(frozen=True)
 class Revision:
     """The database at one commit that changes it: counts over all its files.
@@ -166,6 +205,8 @@ class History:
     blobs_reused: int
     seconds: float
     warnings: list[str] = field(default_factory=list)
+    #: Entries starting and stopping to fold along the first-parent line, oldest first.
+    events: list[FoldEvent] = field(default_factory=list)
 
     def records(self) -> list[dict[str, Any]]:
         """Rows of ``history.csv``, oldest commit first."""
@@ -193,6 +234,10 @@ class History:
     def write_csv(self, stream: TextIO) -> None:
         """Write ``history.csv``: floats round-trip, booleans ``true``/``false``."""
         write_csv(stream, HISTORY_COLUMNS, self.records())
+
+    def write_events_csv(self, stream: TextIO) -> None:
+        """Write ``events.csv``: each entry starting or stopping to fold, oldest first."""
+        write_csv(stream, EVENT_COLUMNS, [event.record() for event in self.events])
 
     def write_introduced_csv(self, stream: TextIO) -> None:
         """Write ``introduced.csv``: floats round-trip, ``inf`` for infinite values."""

@@ -65,12 +65,14 @@ def entry_identity(entry: DistortionEntry) -> tuple:
 
 class Summary(NamedTuple):
     """What one file version holds: its error ("" if none), its
-    :data:`~.results.COUNT_COLUMNS`, and the identity of each audited entry,
-    in file order."""
+    :data:`~.results.COUNT_COLUMNS`, the identity of each audited entry, in
+    file order, and the positions among those of the entries that fold
+    inside their image."""
 
     error: str
     counts: tuple[int, ...]
     identities: list[tuple]
+    folding: tuple[int, ...] = ()
 
 
 def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
@@ -82,6 +84,7 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
     finite_per_model = dict.fromkeys(MODELS, 0)
     folds = folds_rectilinear = folds_paper_rectilinear = 0
     identities = []
+    folding = []
     for row, r_max, r_normalized_paper, folds_in_image in zip(
         tables.distortion,
         metrics["r_max"],
@@ -102,6 +105,7 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
         if folds_in_image:
             folds += 1
             folds_rectilinear += rectilinear
+            folding.append(len(identities) - 1)
         if rectilinear and r_normalized_paper < 1:
             folds_paper_rectilinear += 1
     counts = (
@@ -114,7 +118,7 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
         folds_rectilinear,
         folds_paper_rectilinear,
     )
-    return Summary(tables.error, counts, identities)
+    return Summary(tables.error, counts, identities, tuple(folding))
 
 
 def read_versions(
@@ -179,7 +183,7 @@ def _read_batch(
         if answer is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
-        error, counts, identities = summarize(tables, file_metrics(tables, None, solved))
+        error, counts, identities, folding = summarize(tables, file_metrics(tables, None, solved))
         identities = [known.setdefault(identity, identity) for identity in identities]
-        summaries.append((error, counts, identities))
+        summaries.append((error, counts, identities, folding))
     return summaries
