@@ -114,6 +114,7 @@ __all__ = [
     "read_sources",
     "select",
     "to_dataframe",
+    "written_texts",
 ]
 
 if TYPE_CHECKING:
@@ -250,9 +251,7 @@ def fix_entry(
         raise ValueError(f"{entry.file}:{entry.line}: entry was not audited ({entry.status})")
     names = MODEL_COEFFICIENTS[entry.model]
     old = coefficients_of(entry)
-    if texts is None:
-        texts = {name: repr(value) for name, value in zip(names, old, strict=True)}
-    old_texts = tuple(texts.get(name) or "0" for name in names)
+    old_texts = written_texts(names, old, texts)
     goal = goal_for(entry.aspect_ratio, margin, target, image_radius)
     before = judge(entry.model, old, goal)
     common = dict(
@@ -298,6 +297,16 @@ def fix_entry(
         max_change_half_diagonal=change.max_half_diagonal,
         min_slope_after=after.min_slope,
     )
+
+
+def written_texts(
+    names: Sequence[str], values: Sequence[float], texts: Mapping[str, str] | None
+) -> tuple[str, ...]:
+    """Each coefficient as the file writes it (``texts``, its attribute values),
+    a missing one as 0; without ``texts``, the shortest form of each value."""
+    if texts is None:
+        texts = {name: repr(value) for name, value in zip(names, values, strict=True)}
+    return tuple(texts.get(name) or "0" for name in names)
 
 
 def _rounded_fit(
@@ -558,7 +567,8 @@ class _ZoomLens:
         moving = {p for p, r in self.results.items() if r.new}
         joint = None
         for widened in (moving | zooms.neighbours(self.sets, after[1]), set(range(len(self.old)))):
-            joint = zooms.refit_together(self.sets, self.old, self._texts(widened), widened, goal)
+            self._read_sources(widened)
+            joint = zooms.refit_together(self.sets, self.old, self._texts(), widened, goal)
             if joint is not None:
                 moving = widened
                 break
@@ -566,19 +576,21 @@ class _ZoomLens:
             return self._unsolved(before, after, margin)
         return self._together(joint, moving, goal, tolerance, before, after)
 
-    def _texts(self, positions: set[int]) -> list[tuple[str, ...]]:
-        """Each calibration's coefficients as written (as ``repr`` where not read)."""
+    def _read_sources(self, positions: set[int]) -> None:
+        """Read where the calibrations at ``positions`` are written, where not yet read."""
         extra = [self.sets.indices[p] for p in positions if p not in self.results]
         if self.sources is not None and extra:
             self.sources.merge(read_sources(self.audit, extra))
+
+    def _texts(self) -> list[tuple[str, ...]]:
+        """Each calibration's coefficients as written (as ``repr`` where not read)."""
         names = MODEL_COEFFICIENTS[self.sets.model]
-        found = []
-        for position, old in enumerate(self.old):
-            index = self.sets.indices[position]
-            raw = self.sources.texts(index) if self.sources is not None else None
-            raw = raw or {n: repr(v) for n, v in zip(names, old, strict=True)}
-            found.append(tuple(raw.get(n) or "0" for n in names))
-        return found
+        return [
+            written_texts(
+                names, old, self.sources.texts(index) if self.sources is not None else None
+            )
+            for index, old in zip(self.sets.indices, self.old, strict=True)
+        ]
 
     def _unsolved(
         self, before: tuple[float, float], after: tuple[float, float], margin: float
@@ -617,10 +629,13 @@ class _ZoomLens:
             f"(r_normalized {after[0]:.3f})"
         )
         found = {}
+        texts = self._texts()
         for position in sorted(moving):
-            if joint.texts[position] == self._texts(set())[position]:
+            if joint.texts[position] == texts[position]:
                 continue  # left as it was
-            found[position] = self._member(position, joint, goal, tolerance, note, before)
+            found[position] = self._member(
+                position, (joint, texts[position]), goal, tolerance, note, before
+            )
         if any(not r.fixed for r in found.values()):
             blocked = ", ".join(r.where for r in found.values() if not r.fixed)
             for position, r in found.items():
@@ -636,13 +651,15 @@ class _ZoomLens:
     def _member(
         self,
         position: int,
-        joint: zooms.JointFit,
+        fitted: tuple[zooms.JointFit, tuple[str, ...]],
         goal: Goal,
         tolerance: float,
         note: str,
         before: tuple[float, float],
     ) -> FixResult:
-        """The result of one calibration refitted with the others."""
+        """The result of one calibration refitted with the others (the joint
+        fit, and the calibration's coefficients as written)."""
+        joint, old_texts = fitted
         index = self.sets.indices[position]
         entry = self.audit.entries[index]
         old, new = self.old[position], joint.coefficients[position]
@@ -654,7 +671,7 @@ class _ZoomLens:
             entry=entry,
             names=MODEL_COEFFICIENTS[entry.model],
             old=old,
-            old_texts=self._texts(set())[position],
+            old_texts=old_texts,
             new=new,
             new_texts=joint.texts[position],
             goal=goal,
