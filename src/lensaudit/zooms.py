@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.polynomial import polynomial as P
 
-from . import metrics, refit
+from . import refit
 from .interpolation import weights
+from .pipeline import metric_columns
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK
-from .solver.kernel import entry_metrics
 
 # typing only for type checkers
 TYPE_CHECKING = False
@@ -108,19 +108,22 @@ def interpolated_rows(
 def r_normalized_at(
     model: str, rows: np.ndarray, aspect_ratio: float, image_radius: float
 ) -> np.ndarray:
-    """r_normalized (d_max over the image radius) of each row of coefficients."""
+    """r_normalized (d_max over the image radius) of each row of coefficients,
+    computed as the pipeline computes every entry's metrics."""
     count = len(rows)
-    values = dict(zip(MODEL_COEFFICIENTS[model], rows.T, strict=True))
-    nan = np.full(count, math.nan)
-    found = metrics.compute(
-        [model] * count,
-        *(values.get(name, nan) for name in ("a", "b", "c", "k1", "k2")),
-        np.ones(count),
-        np.full(count, aspect_ratio),
-        np.ones(count),
-        np.ones(count, dtype=bool),
-    )
-    return np.asarray(found.d_max, dtype=np.float64) / image_radius
+    values = dict(zip(MODEL_COEFFICIENTS[model], np.asarray(rows).T.tolist(), strict=True))
+    nan = [math.nan] * count
+    columns = {name: values.get(name, nan) for name in ("a", "b", "c", "k1", "k2")}
+    columns |= {
+        "status": [STATUS_OK] * count,
+        "lens": [""] * count,
+        "type": ["rectilinear"] * count,
+        "model": [model] * count,
+        "crop_factor": [1.0] * count,
+        "aspect_ratio": [aspect_ratio] * count,
+        "focal": [1.0] * count,
+    }
+    return np.asarray(metric_columns(columns)["d_max"], dtype=np.float64) / image_radius
 
 
 def sweep(
@@ -372,7 +375,8 @@ def _judge_interval(
         middle = (t_low + t_high) / 2
         focal = f0 + middle * (f1 - f0)
         row = np.array([[np.polyval(q[i][::-1], middle) / focal for i in range(len(q))]])
-        value = _r_normalized(model, row[0], calibrations)
+        value = float(r_normalized_at(model, row, calibrations.aspect_ratio,
+                                      calibrations.image_radius)[0])  # fmt: skip
         if value < threshold:
             return Between(low, high, FOLDS, focal, value)
         radius = _radius_to_check(model, row[0], reach, value / threshold)
@@ -383,21 +387,6 @@ def _judge_interval(
             return Between(low, high, UNDECIDED, focal, value)
         boxes += [(t_low, middle, depth + 1), (middle, t_high, depth + 1)]
     return Between(low, high, CLEAR)
-
-
-def _r_normalized(model: str, coefficients: np.ndarray, calibrations: CalibrationSet) -> float:
-    """r_normalized of one model over the set's image: by the solver's scalar
-    kernel, or its array code where the kernel leaves it to that."""
-    values = dict(zip(MODEL_COEFFICIENTS[model], coefficients.tolist(), strict=True))
-    found = entry_metrics(
-        model, *(values.get(n, math.nan) for n in ("a", "b", "c", "k1", "k2")),
-        1.0, calibrations.aspect_ratio, 1.0, False,
-    )  # fmt: skip
-    if found is None:
-        row = np.asarray([coefficients])
-        return float(r_normalized_at(model, row, calibrations.aspect_ratio,
-                                     calibrations.image_radius)[0])  # fmt: skip
-    return found[1] / calibrations.image_radius
 
 
 def _radius_to_check(
