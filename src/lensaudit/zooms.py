@@ -379,10 +379,12 @@ def _judge_interval(
                                       calibrations.image_radius)[0])  # fmt: skip
         if value < threshold:
             return Between(low, high, FOLDS, focal, value)
-        radius = _radius_to_check(model, row[0], reach, value / threshold)
-        if radius is not None and _clear(q, (t_low, t_high), (f0, f1), terms_r, slopes_r,
-                                         radius, reach):  # fmt: skip
-            continue
+        # Bounds that overflow are not finite, and prove nothing: the box is halved.
+        with np.errstate(all="ignore"):
+            radius = _radius_to_check(model, row[0], reach, value / threshold)
+            if radius is not None and _clear(q, (t_low, t_high), (f0, f1), terms_r, slopes_r,
+                                             radius, reach):  # fmt: skip
+                continue
         if depth >= _MAX_DEPTH:
             return Between(low, high, UNDECIDED, focal, value)
         boxes += [(t_low, middle, depth + 1), (middle, t_high, depth + 1)]
