@@ -20,6 +20,7 @@ combinations of the calibrations'.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,8 +30,7 @@ from numpy.polynomial import polynomial as P
 
 from . import refit
 from .interpolation import weights
-from .pipeline import metric_columns
-from .read.records import MODEL_COEFFICIENTS, STATUS_OK
+from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry
 
 # typing only for type checkers
 TYPE_CHECKING = False
@@ -61,8 +61,16 @@ def calibration_sets(audit: Audit) -> list[CalibrationSet]:
     """Every lens's set of audited distortion calibrations: entries of one lens
     of one file with the same crop factor and aspect ratio, of the model of
     the first of them (liblensfun ignores the others)."""
+    return calibration_sets_of(audit.entries, audit.metrics.r_corner.tolist())
+
+
+def calibration_sets_of(
+    entries: Sequence[DistortionEntry], image_radius: Sequence[float]
+) -> list[CalibrationSet]:
+    """:func:`calibration_sets` of distortion ``entries`` with the radius of
+    each one's image (``r_corner``, Hugin units); indices are into ``entries``."""
     groups: dict[tuple, list[int]] = {}
-    for index, entry in enumerate(audit.entries):
+    for index, entry in enumerate(entries):
         if entry.status != STATUS_OK or entry.model not in MODEL_COEFFICIENTS:
             continue
         key = (entry.file, entry.maker, entry.lens, entry.mounts, entry.crop_factor,
@@ -70,19 +78,27 @@ def calibration_sets(audit: Audit) -> list[CalibrationSet]:
         groups.setdefault(key, []).append(index)
     found = []
     for indices in groups.values():
-        model = audit.entries[indices[0]].model
-        kept = tuple(i for i in indices if audit.entries[i].model == model)
-        first = audit.entries[kept[0]]
+        model = entries[indices[0]].model
+        kept = tuple(i for i in indices if entries[i].model == model)
+        first = entries[kept[0]]
         found.append(
             CalibrationSet(
                 kept,
-                tuple(audit.entries[i].focal for i in kept),
+                tuple(entries[i].focal for i in kept),
                 model,
                 first.aspect_ratio,
-                float(audit.metrics.r_corner[kept[0]]),
+                float(image_radius[kept[0]]),
             )
         )
     return found
+
+
+def coefficient_table(
+    calibrations: CalibrationSet, entries: Sequence[DistortionEntry]
+) -> list[tuple[float, ...]]:
+    """The coefficients of each calibration of a set, in its model's order."""
+    names = MODEL_COEFFICIENTS[calibrations.model]
+    return [tuple(getattr(entries[i], name) for name in names) for i in calibrations.indices]
 
 
 def focal_samples(focals: Sequence[float], step: float = SWEEP_STEP) -> np.ndarray:
@@ -111,19 +127,28 @@ def r_normalized_at(
     """r_normalized (d_max over the image radius) of each row of coefficients,
     computed as the pipeline computes every entry's metrics."""
     count = len(rows)
-    values = dict(zip(MODEL_COEFFICIENTS[model], np.asarray(rows).T.tolist(), strict=True))
-    nan = [math.nan] * count
-    columns = {name: values.get(name, nan) for name in ("a", "b", "c", "k1", "k2")}
-    columns |= {
-        "status": [STATUS_OK] * count,
-        "lens": [""] * count,
-        "type": ["rectilinear"] * count,
-        "model": [model] * count,
-        "crop_factor": [1.0] * count,
-        "aspect_ratio": [aspect_ratio] * count,
-        "focal": [1.0] * count,
-    }
-    return np.asarray(metric_columns(columns)["d_max"], dtype=np.float64) / image_radius
+    _, d_max = _extrema([model] * count, np.asarray(rows, dtype=np.float64))
+    return d_max / image_radius
+
+
+def _extrema(models: Sequence[str], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(r_max, d_max) of each row of coefficients (in its model's order, padded
+    with anything): the pipeline's solver, its array code (rows come by the
+    thousand here)."""
+    from . import metrics
+
+    count = len(models)
+    columns = {name: np.full(count, math.nan) for name in ("a", "b", "c", "k1", "k2")}
+    model_array = np.asarray(models)
+    for model in set(models):
+        chosen = model_array == model
+        for position, name in enumerate(MODEL_COEFFICIENTS[model]):
+            columns[name][chosen] = rows[chosen, position]
+    ones = np.ones(count)
+    found = metrics.compute(
+        model_array, *columns.values(), ones, 1.5 * ones, ones, np.ones(count, dtype=bool)
+    )  # crop factor, aspect ratio and focal length do not change r_max or d_max
+    return found.r_max, found.d_max
 
 
 def sweep(
@@ -311,10 +336,14 @@ class _JointProgram:
 #: How far a box of focal lengths is halved before it is left undecided.
 _MAX_DEPTH = 16
 #: Radii boxes from the centre to the radius checked, per box of focal lengths.
-_RADIUS_BOXES = 32
+_RADIUS_BOXES = 8
 #: Rounding allowance, relative to the size of the terms (far above the few
 #: units in the last place a few dozen operations can lose).
 _ROUNDING = 1e-12
+#: Halvings of the search for the radius a box is checked to (any radius
+#: where the middle model is past the image serves; this finds one to ~1e-15).
+_RADIUS_HALVINGS = 52
+_MOST_TERMS = 3  # coefficients of a model at most (ptlens); fewer are padded with zero terms
 CLEAR, FOLDS, UNDECIDED = "clear", "folds", "undecided"
 
 
@@ -347,112 +376,257 @@ def between(
     image radius) > 0; boxes that are not are halved, and a focal length
     whose model folds below the threshold (by the exact solver) is a
     witness."""
-    focals = sorted(set(calibrations.focals))
-    table = np.asarray(coefficients, dtype=np.float64)
-    found = []
-    for low, high in zip(focals, focals[1:], strict=False):
-        found.append(_judge_interval(calibrations, table, low, high, threshold))
+    return between_all([calibrations], [coefficients], threshold)[0]
+
+
+def between_all(
+    sets: Sequence[CalibrationSet],
+    coefficients: Sequence[Sequence[Sequence[float]]],
+    threshold: float = 1.0,
+) -> list[list[Between]]:
+    """:func:`between` of many lenses (``coefficients``: one table per set, one
+    row per calibration): the boxes of every interval are judged together,
+    one round of halving at a time, each round in one batch of arrays."""
+    intervals = _Intervals(sets, coefficients, threshold)
+    verdicts = intervals.judge()
+    found: list[list[Between]] = [[] for _ in sets]
+    for owner, verdict in zip(intervals.owner, verdicts, strict=True):
+        found[owner].append(verdict)
     return found
 
 
-def _judge_interval(
-    calibrations: CalibrationSet, table: np.ndarray, low: float, high: float, threshold: float
-) -> Between:
+@functools.lru_cache(maxsize=4096)
+def _spline_intervals(focals: tuple[float, ...]) -> tuple[tuple, ...]:
+    """The intervals between neighbouring calibrated ``focals`` (in the order
+    liblensfun meets them): (low, high, start, end, terms) with
+    :func:`lensaudit.interpolation.spline_terms` inside each; a function of
+    the focal lengths alone, so one lens's calibrations share it with the
+    same lens in a baseline."""
     from .interpolation import spline_terms
 
-    start, end, terms = spline_terms(calibrations.focals, (low + high) / 2)
-    assert start is not None and end is not None
-    f0, f1 = calibrations.focals[start], calibrations.focals[end]
-    # f x coefficient i = Q_i(t): one row of cubic coefficients (of 1, t, t^2, t^3) per i.
-    q = sum(np.outer(table[k] * calibrations.focals[k], g) for k, g in terms)
-    model = calibrations.model
-    terms_r = refit.term_matrix(model)
-    slopes_r = np.array([P.polyder(row) for row in terms_r])
-    reach = threshold * calibrations.image_radius
-    boxes = [(0.0, 1.0, 0)]
-    while boxes:
-        t_low, t_high, depth = boxes.pop()
-        middle = (t_low + t_high) / 2
-        focal = f0 + middle * (f1 - f0)
-        row = np.array([[np.polyval(q[i][::-1], middle) / focal for i in range(len(q))]])
-        value = float(r_normalized_at(model, row, calibrations.aspect_ratio,
-                                      calibrations.image_radius)[0])  # fmt: skip
-        if value < threshold:
-            return Between(low, high, FOLDS, focal, value)
-        # Bounds that overflow are not finite, and prove nothing: the box is halved.
-        with np.errstate(all="ignore"):
-            radius = _radius_to_check(model, row[0], reach, value / threshold)
-            if radius is not None and _clear(q, (t_low, t_high), (f0, f1), terms_r, slopes_r,
-                                             radius, reach):  # fmt: skip
-                continue
-        if depth >= _MAX_DEPTH:
-            return Between(low, high, UNDECIDED, focal, value)
-        boxes += [(t_low, middle, depth + 1), (middle, t_high, depth + 1)]
-    return Between(low, high, CLEAR)
+    found = []
+    distinct = sorted(set(focals))
+    for low, high in zip(distinct, distinct[1:], strict=False):
+        start, end, terms = spline_terms(focals, (low + high) / 2)
+        assert start is not None and end is not None
+        found.append((low, high, start, end, tuple(terms)))
+    return tuple(found)
 
 
-def _radius_to_check(
-    model: str, coefficients: np.ndarray, reach: float, ratio: float
-) -> float | None:
-    """A radius where the model at a box's middle is past ``reach``, halfway to
-    its d_max (or 5% past where it never folds), before it folds; None if none."""
-    curve = refit.distortion_polynomial(model, coefficients)
-    aim = reach * (1 + (min(ratio, 1.1) - 1) / 2) if math.isfinite(ratio) else reach * 1.05
-    roots = [
-        z.real for z in P.polyroots(P.polysub(curve, [aim]))
-        if abs(z.imag) <= 1e-9 * max(1.0, abs(z)) and z.real > 0
-    ]  # fmt: skip
-    return min(roots) if roots else None
+class _Intervals:
+    """Every interval of every set as arrays: the spline's cubic Q(t) (times f)
+    of each coefficient, the focal lengths at t = 0 and 1, each model's terms
+    of D and of D' (padded to :data:`_MOST_TERMS`), and the radius to reach."""
+
+    def __init__(
+        self,
+        sets: Sequence[CalibrationSet],
+        coefficients: Sequence[Sequence[Sequence[float]]],
+        threshold: float,
+    ) -> None:
+        self.threshold = threshold
+        owner, bounds, models, ends, radius = [], [], [], [], []
+        scaled: list[np.ndarray] = []  # each set's coefficients times its focal lengths
+        which, rows, cubics = [], [], []  # Q of interval which[n] += cubics[n] x scaled row
+        first_row = 0
+        for index, (found, table) in enumerate(zip(sets, coefficients, strict=True)):
+            table = np.asarray(table, dtype=np.float64).reshape(len(found.focals), -1)
+            padded = np.zeros((len(table), _MOST_TERMS))
+            padded[:, : table.shape[1]] = table * np.asarray(found.focals)[:, None]
+            scaled.append(padded)
+            for low, high, start, end, terms in _spline_intervals(tuple(found.focals)):
+                for k, g in terms:
+                    which.append(len(owner))
+                    rows.append(first_row + k)
+                    cubics.append(g)
+                owner.append(index)
+                bounds.append((low, high))
+                models.append(found.model)
+                ends.append((found.focals[start], found.focals[end]))
+                radius.append(found.image_radius)
+            first_row += len(table)
+        q = np.zeros((len(owner), _MOST_TERMS, 4))
+        if which:
+            all_rows = np.concatenate(scaled)[np.asarray(rows)]
+            np.add.at(q, np.asarray(which), all_rows[:, :, None] * np.asarray(cubics)[:, None, :])
+        self.owner, self.bounds, self.models = owner, bounds, models
+        self.q = q
+        ends_array = np.asarray(ends, dtype=np.float64).reshape(len(owner), 2)
+        self.f0, self.f1 = ends_array[:, 0], ends_array[:, 1]
+        self.image_radius = np.asarray(radius, dtype=np.float64)
+        padded = {}
+        for model in set(models):
+            rows = np.zeros((_MOST_TERMS, 6))
+            own = refit.term_matrix(model)
+            rows[: len(own)] = own
+            padded[model] = rows
+        self.terms = np.asarray([padded[m] for m in models]).reshape(len(owner), _MOST_TERMS, 6)
+        self.slopes = self.terms[:, :, 1:] * np.arange(1, 6)
+
+    def judge(self) -> list[Between]:
+        """Every interval's verdict: boxes of focal lengths, halved round by round."""
+        count = len(self.owner)
+        verdicts: list[Between | None] = [None] * count
+        box = np.arange(count)  # the interval each box belongs to
+        t_low, t_high = np.zeros(count), np.ones(count)
+        for depth in range(_MAX_DEPTH + 1):
+            if not len(box):
+                break
+            middle = (t_low + t_high) / 2
+            focal = self.f0[box] + middle * (self.f1[box] - self.f0[box])
+            rows = _horner(self.q[box], middle[:, None]) / focal[:, None]
+            r_max, d_max = _extrema([self.models[i] for i in box], rows)
+            with np.errstate(all="ignore"):
+                value = d_max / self.image_radius[box]
+            folds = value < self.threshold
+            # The witness of an interval that folds: its lowest focal length found folding.
+            for position in np.flatnonzero(folds)[np.argsort(focal[folds], kind="stable")]:
+                interval = int(box[position])
+                if verdicts[interval] is None:
+                    low, high = self.bounds[interval]
+                    verdicts[interval] = Between(
+                        low, high, FOLDS, float(focal[position]), float(value[position])
+                    )
+            live = np.array([verdicts[i] is None for i in box], dtype=bool)
+            # Bounds that overflow are not finite, and prove nothing: the box is halved.
+            with np.errstate(all="ignore"):
+                reach = self.threshold * self.image_radius[box]
+                radius = _radius_past(rows, self.terms[box], reach, value / self.threshold, r_max)
+                clear = live & self._clear(box, t_low, t_high, radius, reach)
+            left = live & ~clear
+            if depth == _MAX_DEPTH:
+                for position in np.flatnonzero(left):
+                    interval = int(box[position])
+                    if verdicts[interval] is None:
+                        low, high = self.bounds[interval]
+                        verdicts[interval] = Between(
+                            low, high, UNDECIDED, float(focal[position]), float(value[position])
+                        )
+                break
+            box, middle = box[left], middle[left]
+            t_low, t_high = t_low[left], t_high[left]
+            box = np.concatenate([box, box])
+            t_low, t_high = np.concatenate([t_low, middle]), np.concatenate([middle, t_high])
+        return [
+            v if v is not None else Between(*self.bounds[i], CLEAR) for i, v in enumerate(verdicts)
+        ]
+
+    def _clear(
+        self,
+        box: np.ndarray,
+        t_low: np.ndarray,
+        t_high: np.ndarray,
+        radius: np.ndarray,
+        reach: np.ndarray,
+    ) -> np.ndarray:
+        """Whether, for every t in each box: f D'(r) > 0 for r in [0, radius] and
+        f (D(radius) - reach) > 0 (f = f0 + t (f1 - f0)).
+
+        Both are linear in (f, Q_1(t), Q_2(t), Q_3(t)), a cubic curve in t that
+        lies in the convex hull of its four Bernstein control points over the
+        box: each holds for every t when it holds at those four points. At
+        each point, f D'(r) is one polynomial in r, bounded below on boxes of
+        r by interval arithmetic; rounding is allowed for throughout."""
+        f0, f1 = self.f0[box], self.f1[box]
+        width = t_high - t_low
+        # Control points of f (linear: its values at u = 0, 1/3, 2/3, 1) and of each Q_i.
+        thirds = np.arange(4) / 3
+        f_points = (f0 + t_low * (f1 - f0))[:, None] + (width * (f1 - f0))[:, None] * thirds
+        f_size = np.abs(f0)[:, None] + np.abs(f1 - f0)[:, None] * (t_high[:, None] + 1)
+        q_points, q_size = _bernstein(self.q[box], t_low, width)  # (boxes, terms, 4)
+        # f (D(R) - reach) = f (R - reach) + sum_i Q_i term_i(R), at each control point
+        terms = self.terms[box]
+        term_at = _horner(terms, radius[:, None])[:, :, None]
+        term_size = _horner(np.abs(terms), radius[:, None])[:, :, None]
+        excess = f_points * (radius - reach)[:, None] + (q_points * term_at).sum(axis=1)
+        size = f_size * (radius + reach)[:, None] + (q_size * term_size).sum(axis=1)
+        reaches = np.all(excess - _ROUNDING * size > 0, axis=1)
+        # f D'(r) = f + sum_i Q_i s_i(r): one polynomial in r per control point.
+        slopes = self.slopes[box]  # (boxes, terms, powers)
+        curve = np.einsum("bij,bik->bjk", q_points, slopes)  # (boxes, 4 points, powers)
+        curve[:, :, 0] += f_points
+        curve_size = np.einsum("bij,bik->bjk", q_size, np.abs(slopes))
+        curve_size[:, :, 0] += f_size
+        edges = radius[:, None] * np.linspace(0.0, 1.0, _RADIUS_BOXES + 1)
+        lower, _, partial = _interval_polynomial(
+            curve[:, :, None, :], edges[:, None, :-1], edges[:, None, 1:]
+        )
+        magnitude = _horner(curve_size[:, :, None, :], edges[:, None, 1:])
+        rising = np.all(lower - _ROUNDING * (partial + magnitude) > 0, axis=(1, 2))
+        return reaches & rising
+
+
+def _bernstein(
+    cubics: np.ndarray, t_low: np.ndarray, width: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Bernstein control points over [t_low, t_low + width] of cubics
+    (coefficients of 1, t, t^2, t^3 along the last axis; one box per row),
+    and a bound on the magnitude of every partial result (for rounding)."""
+    low, span = t_low[:, None, None], width[:, None, None]
+
+    def controls(values: np.ndarray) -> np.ndarray:
+        c0, c1, c2, c3 = (part[..., None] for part in np.moveaxis(values, -1, 0))
+        # Taylor coefficients at t_low, times powers of the width: the cubic in u.
+        a0 = c0 + low * (c1 + low * (c2 + low * c3))
+        a1 = span * (c1 + low * (2 * c2 + 3 * low * c3))
+        a2 = span**2 * (c2 + 3 * low * c3)
+        a3 = span**3 * c3
+        return np.concatenate(
+            [a0, a0 + a1 / 3, a0 + 2 * a1 / 3 + a2 / 3, a0 + a1 + a2 + a3], axis=-1
+        )
+
+    # t_low >= 0: the same steps on magnitudes bound every partial result.
+    return controls(cubics), controls(np.abs(cubics))
+
+
+def _horner(coefficients: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Polynomials (coefficients of 1, x, ..., along the last axis) at ``x``
+    (broadcast against the other axes)."""
+    result = coefficients[..., -1] * np.ones_like(x)
+    for power in range(coefficients.shape[-1] - 2, -1, -1):
+        result = result * x + coefficients[..., power]
+    return result
+
+
+def _radius_past(
+    rows: np.ndarray, terms: np.ndarray, reach: np.ndarray, ratio: np.ndarray, r_max: np.ndarray
+) -> np.ndarray:
+    """For each model (``rows`` of coefficients times ``terms``): a radius where
+    it is past ``reach`` (halfway to its d_max, or 5% past where it never
+    folds) and still rising; NaN where none is found. D rises from 0 to
+    r_max, so the radius is found by halving."""
+    curve = np.einsum("bi,bij->bj", rows, terms)
+    curve[:, 1] += 1.0  # D(r) = r + sum of coefficient x term
+    aim = np.where(np.isfinite(ratio), reach * (1 + (np.minimum(ratio, 1.1) - 1) / 2), reach * 1.05)
+    low = np.zeros(len(rows))
+    high = np.where(np.isfinite(r_max), r_max, np.maximum(aim, 1.0))
+    for _ in range(64):  # a model that never folds rises without bound: double until past
+        short = ~np.isfinite(r_max) & (_horner(curve, high) < aim)
+        if not short.any():
+            break
+        high = np.where(short, 2 * high, high)
+    for _ in range(_RADIUS_HALVINGS):
+        middle = (low + high) / 2
+        past = _horner(curve, middle) >= aim
+        low, high = np.where(past, low, middle), np.where(past, middle, high)
+    return np.where(_horner(curve, high) >= aim, high, math.nan)
 
 
 def _interval_polynomial(
-    coefficients: np.ndarray, low: np.ndarray | float, high: np.ndarray | float
+    coefficients: np.ndarray, low: np.ndarray, high: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(lower, upper, size) of a polynomial (coefficients of 1, x, ...) over x in
-    [low, high], by Horner's rule in interval arithmetic; ``size`` bounds
-    the magnitude of every partial result (for the rounding allowance)."""
-    low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
-    lower = upper = np.full(np.broadcast(low, high).shape, float(coefficients[-1]))
+    """(lower, upper, size) of polynomials (coefficients of 1, x, ... along the
+    last axis) over x in [low, high] (broadcast against the other axes), by
+    Horner's rule in interval arithmetic; ``size`` bounds the magnitude of
+    every partial result (for the rounding allowance)."""
+    shape = np.broadcast_shapes(coefficients.shape[:-1], low.shape, high.shape)
+    lower = upper = np.broadcast_to(coefficients[..., -1], shape)
     size = np.abs(lower)
     scale = np.maximum(np.abs(low), np.abs(high))
-    for coefficient in coefficients[-2::-1]:
-        products = (lower * low, lower * high, upper * low, upper * high)
-        lower = np.minimum.reduce(products) + coefficient
-        upper = np.maximum.reduce(products) + coefficient
-        size = size * scale + abs(coefficient)
+    for power in range(coefficients.shape[-1] - 2, -1, -1):
+        a, b, c, d = lower * low, lower * high, upper * low, upper * high
+        coefficient = coefficients[..., power]
+        lower = np.minimum(np.minimum(a, b), np.minimum(c, d)) + coefficient
+        upper = np.maximum(np.maximum(a, b), np.maximum(c, d)) + coefficient
+        size = size * scale + np.abs(coefficient)
     return lower, upper, size
-
-
-def _clear(
-    q: np.ndarray,
-    t_box: tuple[float, float],
-    ends: tuple[float, float],
-    terms_r: np.ndarray,
-    slopes_r: np.ndarray,
-    radius: float,
-    reach: float,
-) -> bool:
-    """Whether, for every t in ``t_box``: f D'(r) > 0 for r in [0, radius] and
-    f D(radius) > f reach (f = ends[0] + t (ends[1] - ends[0]))."""
-    t_low, t_high = t_box
-    f_a, f_b = ends[0] + t_low * (ends[1] - ends[0]), ends[0] + t_high * (ends[1] - ends[0])
-    f_low, f_high = min(f_a, f_b), max(f_a, f_b)
-    q_parts = [_interval_polynomial(row, t_low, t_high) for row in q]
-    # f (D(R) - reach) = f (R - reach) + sum_i Q_i(t) term_i(R)
-    lower = min(f_low * (radius - reach), f_high * (radius - reach))
-    size = f_high * (radius + reach)
-    for (q_low, q_high, q_size), term in zip(q_parts, terms_r, strict=True):
-        value = float(np.polynomial.polynomial.polyval(radius, term))
-        lower = lower + min(q_low * value, q_high * value)
-        size = size + q_size * abs(value)
-    if not lower - _ROUNDING * size > 0:
-        return False
-    # f D'(r) = f + sum_i Q_i(t) s_i(r), on boxes of r from 0 to R.
-    edges = np.linspace(0.0, radius, _RADIUS_BOXES + 1)
-    lower, size = np.full(_RADIUS_BOXES, f_low), np.full(_RADIUS_BOXES, f_high)
-    for (q_low, q_high, q_size), slope in zip(q_parts, slopes_r, strict=True):
-        s_low, s_high, s_size = _interval_polynomial(slope, edges[:-1], edges[1:])
-        products = (q_low * s_low, q_low * s_high, q_high * s_low, q_high * s_high)
-        lower = lower + np.minimum.reduce(products)
-        size = size + q_size * s_size
-    return bool(np.all(lower - _ROUNDING * size > 0))

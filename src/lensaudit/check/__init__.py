@@ -10,6 +10,11 @@ sentence. Errors make the check fail; warnings and notices do not.
   below the margin; ``fold-outside-image`` (notice, only when asked for) for
   any other finite r_max. r_normalized = D(r_max) / hypot(aspect, 1), both in
   Hugin units (1 = half the short side of the calibration image).
+- Zooms as liblensfun interpolates them (see :mod:`lensaudit.check.between`):
+  ``fold-between-calibrations`` (error) when, at some focal length between
+  two calibrations of a lens that do not fold themselves, the model
+  liblensfun interpolates folds back inside the image; proven over every
+  focal length, not sampled.
 - Input (errors): ``xml-error`` (the file is not well-formed XML; its entries
   are counted but not checked further), ``not-a-database`` (well-formed, but
   its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
@@ -91,6 +96,7 @@ from .result import (
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
     FILE_CODES,
+    FOLD_BETWEEN_CALIBRATIONS,
     FOLD_IN_IMAGE,
     FOLD_NEAR_IMAGE,
     FOLD_OUTSIDE_IMAGE,
@@ -130,6 +136,7 @@ __all__ = [
     "DUPLICATE_FOCAL",
     "DUPLICATE_LENS",
     "FILE_CODES",
+    "FOLD_BETWEEN_CALIBRATIONS",
     "FOLD_IN_IMAGE",
     "FOLD_NEAR_IMAGE",
     "FOLD_OUTSIDE_IMAGE",

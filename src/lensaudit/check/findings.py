@@ -27,6 +27,7 @@ from ..read.records import (
     DistortionEntry,
 )
 from ..read.tables import TCA, VIGNETTING
+from .between import folds_between
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .matching import calibration_content, entry_content, file_identified, lens_identity
@@ -119,7 +120,9 @@ def file_findings(
     if not parsed:
         return found  # numpy and the audits are not needed
     entries = [(index, entry) for index in parsed for entry in read[index].entries]
-    metrics = _metrics([read[index] for index in parsed], [entry for _, entry in entries], cache)
+    metrics, corners = _metrics(
+        [read[index] for index in parsed], [entry for _, entry in entries], cache
+    )
     for position, (index, entry) in enumerate(entries):
         if entry.status != STATUS_OK:
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
@@ -139,6 +142,10 @@ def file_findings(
         found[index].append(item)
     for index, item in duplicate_focals(read):
         found[index].append(item)
+    names = [read[index].source.file_name for index, _ in entries]
+    folding = [m is not None and not m.r_normalized >= 1 for m in metrics]
+    for position, item in folds_between([e for _, e in entries], corners, folding, names, verbose):
+        found[entries[position][0]].append(item)
     for index, file in enumerate(read):
         found[index] += conflicting_calibrations(file)
         found[index] += starting_values(file)
@@ -156,21 +163,23 @@ class _EntryMetrics:
 
 def _metrics(
     files: list[ParsedSource], entries: list[DistortionEntry], cache: Cache | None
-) -> list[_EntryMetrics | None]:
+) -> tuple[list[_EntryMetrics | None], list[float]]:
     """r_max and the rest for each entry of ``files`` (``entries``, those of
-    files without a file-level problem), None where r_max is infinite: the
-    pipeline's metrics of each file, from the cache where it has them; entry
-    by entry where they cannot be had."""
+    files without a file-level problem), None where r_max is infinite, and
+    each entry's r_corner: the pipeline's metrics of each file, from the
+    cache where it has them; entry by entry where they cannot be had."""
     try:
-        found = []
+        found, corners = [], []
         for file in files:
             m = pipeline.file_metrics(file.tables, cache)
             values = zip(m["r_max"], m["d_max"], m["r_corner"], m["r_normalized"], strict=True)
             # None for the common case, a model that never folds: nothing to report.
             found += [None if v[0] == math.inf else _EntryMetrics(*v) for v in values]
-        return found
+            corners += m["r_corner"]
+        return found, corners
     except Exception:  # noqa: BLE001 - one bad entry must not hide the others' findings
-        return _entry_metrics(entries)
+        found = _entry_metrics(entries)
+        return found, [math.nan if m is None else m.r_corner for m in found]
 
 
 def _entry_metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]:

@@ -26,6 +26,7 @@ DEFAULT_MARGIN = FOLD_MARGIN
 FOLD_IN_IMAGE = "fold-in-image"
 FOLD_NEAR_IMAGE = "fold-near-image"
 FOLD_OUTSIDE_IMAGE = "fold-outside-image"
+FOLD_BETWEEN_CALIBRATIONS = "fold-between-calibrations"
 NOT_COMPUTABLE = "r-max-not-computable"
 XML_ERROR = "xml-error"
 NOT_A_DATABASE = "not-a-database"
