@@ -59,6 +59,10 @@ OUTCOME_NAMES = {OUTCOME_NONE: "", OUTCOME_NAN: "NaN", OUTCOME_UNCORRECTED: "unc
 
 _HALF_DIAGONAL_MM = float(np.hypot(36.0, 24.0))
 _MODELS = ("ptlens", "poly3", "poly5")
+#: The entry fields :func:`liblensfun_model` takes, in order.
+MODEL_FIELDS = (
+    "model", "a", "b", "c", "k1", "k2", "focal", "real_focal", "crop_factor", "aspect_ratio",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
