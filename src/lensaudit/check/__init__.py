@@ -35,6 +35,10 @@ sentence. Errors make the check fail; warnings and notices do not.
 - Metadata Lensfun's own CI does not check (warnings, see
   :mod:`lensaudit.check.metadata`): ``undefined-mount``,
   ``conflicting-calibration``, ``vignetting-starting-values``.
+- Inversion (warning, see :mod:`lensaudit.check.inversion`):
+  ``inversion-fails-in-image`` where liblensfun's reverse transform cannot
+  invert the model by its Newton steps inside the image (not reported for an
+  entry that is ``fold-in-image``).
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -100,6 +104,7 @@ from .result import (
     FOLD_IN_IMAGE,
     FOLD_NEAR_IMAGE,
     FOLD_OUTSIDE_IMAGE,
+    INVERSION_FAILS_IN_IMAGE,
     MESSAGE_LIMIT,
     MISSING_ATTRIBUTE,
     NAME_LIMIT,
@@ -141,6 +146,7 @@ __all__ = [
     "FOLD_NEAR_IMAGE",
     "FOLD_OUTSIDE_IMAGE",
     "HISTORY_DEPTH",
+    "INVERSION_FAILS_IN_IMAGE",
     "MESSAGE_LIMIT",
     "MISSING_ATTRIBUTE",
     "NAME_LIMIT",

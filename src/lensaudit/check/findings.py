@@ -1,7 +1,8 @@
 """The rules: from parsed files to findings, each with the identities that
 match it against a baseline's (:class:`lensaudit.check.result.Identified`).
 
-Input problems and folds of the distortion entries, the vignetting and TCA
+Input problems, folds and failed inversions (:mod:`lensaudit.check.inversion`)
+of the distortion entries, the vignetting and TCA
 audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`)
 and the metadata Lensfun's own CI does not check (:mod:`lensaudit.check.metadata`).
 """
@@ -30,6 +31,7 @@ from ..read.tables import TCA, VIGNETTING
 from .between import folds_between
 from .duplicates import duplicate_focals, duplicate_lenses
 from .inputs import Source
+from .inversion import inversion_findings
 from .matching import calibration_content, entry_content, file_identified, lens_identity
 from .metadata import conflicting_calibrations, starting_values, undefined_mounts
 from .parsing import ParsedSource, parse_sources
@@ -123,21 +125,26 @@ def file_findings(
     metrics, corners = _metrics(
         [read[index] for index in parsed], [entry for _, entry in entries], cache
     )
+    inversions = inversion_findings([entry for _, entry in entries])
     for position, (index, entry) in enumerate(entries):
         if entry.status != STATUS_OK:
             code = _STATUS_CODES.get(entry.status, BAD_VALUE)
-            finding = entry_finding(SEVERITY_ERROR, code, entry, entry.message)
+            made = [entry_finding(SEVERITY_ERROR, code, entry, entry.message)]
         else:
             entry_metrics = metrics[position]
-            if entry_metrics is None:
-                continue  # never folds
-            finding = _fold_finding(entry, entry_metrics, margin, verbose)
+            fold = None
+            if entry_metrics is not None:  # None: never folds
+                fold = _fold_finding(entry, entry_metrics, margin, verbose)
+            made = [fold, inversions[position]]
+            if fold is not None and fold.code == FOLD_IN_IMAGE:
+                made = [fold]  # the fold is the finding; its inversion fails too, for that
+        for finding in made:
             if finding is None:
                 continue
-        content = (finding.severity, finding.code, entry_content(entry))
-        # The lens by name first; then by content alone, for a renamed lens.
-        keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
-        found[index].append(Identified(finding, keys, (read[index].source.file_name,)))
+            content = (finding.severity, finding.code, entry_content(entry))
+            # The lens by name first; then by content alone, for a renamed lens.
+            keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
+            found[index].append(Identified(finding, keys, (read[index].source.file_name,)))
     for index, item in calibration_findings(read, verbose):
         found[index].append(item)
     for index, item in duplicate_focals(read):

@@ -41,6 +41,7 @@ BASELINE_UNREADABLE = "baseline-unreadable"
 UNDEFINED_MOUNT = "undefined-mount"
 CONFLICTING_CALIBRATION = "conflicting-calibration"
 VIGNETTING_STARTING_VALUES = "vignetting-starting-values"
+INVERSION_FAILS_IN_IMAGE = "inversion-fails-in-image"
 
 #: Findings about a whole file.
 FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
