@@ -14,12 +14,15 @@ shared clone in a temporary directory is checked out commit by commit (only
 data/db), so the repository given is never touched.
 
 Every new failing finding is then judged by an oracle that knows nothing of
-how the check matches entries: the finding is justified only if a line it
-points at (for a finding about two entries or two lenses, either of them)
-lies in a <lens> block that `git diff -U0 P C` touches, or, for a finding
-about a whole file (or a line outside any <lens>), in a file the diff
-touches. Lens blocks are found by scanning the text for <lens ...> and
-</lens>, so they are known also in a file that is not well-formed.
+how the check matches entries: the finding is justified only if the line it
+points at lies in a top-level <lens> block in which `git diff -U0 P C`
+changed a line (context lines do not count), or, for a finding about a
+whole file (or a line outside any <lens>), in a file the diff touches. A
+finding about two entries or two lenses is judged by its own line, not by
+its twin's: GitHub shows an annotation inline only on lines the pull
+request changed, so a duplicate must point at the one the change added.
+Lens blocks are found by scanning the text for <lens ...> and </lens>, so
+they are known also in a file that is not well-formed.
 
 Verdicts: pass (no failing finding), fail-justified (every failing finding
 is justified), fail-FALSE-BLAME (at least one is not; it is marked with !),
@@ -233,10 +236,8 @@ def judge(
     verdict = FAIL_JUSTIFIED
     described = []
     for finding in failing:
-        locations = [(finding.file, finding.line)]
-        # A finding without related places (an earlier check) is judged by its own line.
-        locations += [tuple(r) for r in getattr(finding, "related", ())]
-        locations = [(_repository_path(worktree, f), line) for f, line in locations]
+        # Its own line only: the twin of a duplicate is where the annotation is not.
+        locations = [(_repository_path(worktree, finding.file), finding.line)]
         ok = justified(locations, finding.code in FILE_LEVEL_CODES, touched, blocks)
         if not ok:
             verdict = FALSE_BLAME

@@ -474,3 +474,32 @@ def test_entry_whose_r_max_cannot_be_computed_is_an_error_and_the_others_are_che
     result = check(path)
     assert codes(result) == [("error", "fold-in-image", 10), ("error", "r-max-not-computable", 11)]
     assert "FloatingPointError: solver failed" in result.findings[1].message
+
+
+def test_a_duplicate_focal_written_above_the_old_entry_is_reported_on_the_new_one(two_databases):
+    old = '<distortion model="poly3" focal="20" k1="0.01"/>'
+    new = '<distortion model="poly3" focal="20" k1="0.02"/>'
+    before, after = two_databases([old], [new, old])  # the change adds line 10, above line 11
+    (finding,) = check(after, baseline=before).findings
+    assert (finding.code, finding.line, finding.known) == ("duplicate-focal", 10, False)
+    assert finding.related == ((finding.file, 11),)
+    (alone,) = check(after).findings  # without a baseline: on the second, naming the first
+    assert (alone.line, alone.related) == (11, ((alone.file, 10),))
+
+
+def test_a_duplicate_lens_written_above_the_old_one_is_reported_on_the_new_one(tmp_path):
+    def lens(k1: str) -> str:
+        return (
+            "  <lens><maker>M</maker><model>Twin</model><mount>X</mount>"
+            f'<cropfactor>1</cropfactor><calibration><distortion model="poly3" focal="20" '
+            f'k1="{k1}"/></calibration></lens>\n'
+        )
+
+    for name, lenses in (("before", [lens("0.01")]), ("after", [lens("0.02"), lens("0.01")])):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "db.xml").write_text(
+            '<lensdatabase version="2">\n' + "".join(lenses) + "</lensdatabase>\n"
+        )
+    (finding,) = check(tmp_path / "after", baseline=tmp_path / "before").findings
+    assert (finding.code, finding.line, finding.known) == ("duplicate-lens", 2, False)
+    assert finding.related == ((finding.file, 3),) and "also defined at" in finding.message

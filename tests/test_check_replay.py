@@ -177,10 +177,29 @@ def test_a_deletion_inside_a_block_touches_it():
     assert not replay_check.justified([("db/a.xml", 6)], False, touched, blocks)
 
 
-def test_a_pair_finding_is_justified_by_either_of_its_two_places():
+def test_a_finding_is_justified_by_its_own_place_not_by_another():
     touched = {"db/b.xml": replay_check.Touched(lines={1})}
     blocks = {"db/a.xml": replay_check.lens_blocks(TEXT), "db/b.xml": [(1, 3)]}
-    assert replay_check.justified([("db/a.xml", 3), ("db/b.xml", 2)], False, touched, blocks)
+    assert replay_check.justified([("db/b.xml", 2)], False, touched, blocks)
+    assert not replay_check.justified([("db/a.xml", 3)], False, touched, blocks)
+
+
+#: Commits that add a lens twin of an existing one, above it in the file or
+#: by a merge: the duplicate must be reported on the lens the commit added.
+ADDED_TWINS = {
+    "f206332": ("duplicate-lens", "mil-sigma.xml"),  # a second Sigma 19mm f/2.8 EX DN above
+    "b73f02a": ("duplicate-lens", "slr-canon.xml"),  # a merge adds a second EF 50mm f/1.4
+}
+
+
+@needs_history
+@pytest.mark.parametrize("commit", sorted(ADDED_TWINS))
+def test_a_duplicate_points_at_the_lens_the_commit_added(history, commit):
+    full = replay_check.git(history, "rev-parse", commit).decode().strip()
+    (row,) = replay_check.replay(history, [full])
+    assert row.verdict == replay_check.FAIL_JUSTIFIED, row.findings
+    code, name = ADDED_TWINS[commit]
+    assert any(f.startswith(f"{code} {name}:") for f in row.findings), row.findings
 
 
 def test_a_file_level_finding_is_justified_by_any_change_to_its_file():

@@ -81,6 +81,7 @@ import os
 from collections.abc import Sequence
 
 from .. import read as reader
+from .duplicates import Known
 from .findings import analyse, analyse_parsed, fix_suggestion
 from .inputs import (
     HISTORY_DEPTH,
@@ -233,12 +234,14 @@ def _check(
     cache: reader.Cache | None,
 ) -> CheckResult:
     # inputs -> parsing (done) -> findings (-> matching, with a baseline) -> CheckResult
-    files, current = analyse_parsed(read, margin, verbose, cache)
     if baseline is None:
+        files, current = analyse_parsed(read, margin, verbose, cache)
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
     before_read = parse_sources(baseline_sources(label, source.paths), cache)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
+    # What the baseline holds places each duplicate on the one of its two the change added.
+    files, current = analyse_parsed(read, margin, verbose, cache, Known.of(before_read))
     _, before = analyse_parsed(before_read, margin, verbose, cache)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)

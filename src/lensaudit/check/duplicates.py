@@ -2,6 +2,12 @@
 focal length of a calibration. Errors, or warnings when the two are
 identical, since liblensfun then loses nothing by keeping one of them.
 
+A duplicate is reported on the second of the two in reading order, naming
+the first; with a baseline (:class:`Known`), on the one the change added:
+when the baseline has the second and not the first (a new lens written
+above an old one), the finding is on the first, naming the second, so that
+it points at what the change touched.
+
 What a lens is made of comes from the reader: its elements other than its
 untranslated names and its calibrations (:attr:`lensaudit.read.records.Lens.content`),
 and its own distortion entries' values (:func:`lens_contents`).
@@ -10,7 +16,7 @@ and its own distortion entries' values (:func:`lens_contents`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from ..read.records import DistortionEntry
 from .matching import entry_content, lens_identity
@@ -31,12 +37,42 @@ from .result import (
 )
 
 
-def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identified]]:
+@dataclass(frozen=True)
+class Known:
+    """What a baseline holds, as the duplicate rules place their findings:
+    its lenses (name key and :func:`lens_contents`) and its distortion
+    entries (lens by name and :func:`entry_content`)."""
+
+    lenses: frozenset = frozenset()
+    entries: frozenset = frozenset()
+
+    @classmethod
+    def of(cls, read: Sequence[ParsedSource]) -> Known:
+        """The lenses and entries of the files of a baseline that parsed."""
+        lenses, entries = set(), set()
+        for file in read:
+            if file.problem is not None:
+                continue
+            for lens, content in zip(file.lenses, lens_contents(file), strict=True):
+                lenses.add((_lens_key(lens), content))
+            for entry in file.entries:
+                entries.add((lens_identity(entry.maker, entry.lens), entry_content(entry)))
+        return cls(frozenset(lenses), frozenset(entries))
+
+
+def _lens_key(lens: LensRecord) -> tuple:
+    return normalized_name(lens.maker), normalized_name(lens.model), lens.crop_factor
+
+
+def duplicate_focals(
+    read: Sequence[ParsedSource], known: Known | None = None
+) -> Iterable[tuple[int, Identified]]:
     """A second ``<distortion>`` for a focal length of the same calibration.
 
     A calibration is the entries of one ``<lens>`` with the same crop factor
     and aspect ratio (those a ``<calibration>`` element may override). The
-    finding is an error, or a warning when the two entries are identical.
+    finding is an error, or a warning when the two entries are identical; it
+    is on the one of the two ``known`` does not have, if only one.
     """
     for index, file in enumerate(read):
         if file.problem is not None:
@@ -57,6 +93,12 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
             # Contents only for duplicates: a database has thousands of entries.
             first_line, first_content = earlier.line, entry_content(earlier)
             content = entry_content(entry)
+            if known is not None and content != first_content:
+                name = lens_identity(entry.maker, entry.lens)
+                if (name, content) in known.entries and (name, first_content) not in known.entries:
+                    # The change added the first: the finding goes there.
+                    entry, earlier = earlier, entry
+                    first_line, first_content, content = earlier.line, content, first_content
             if content == first_content:
                 severity = SEVERITY_WARNING
                 text = (
@@ -66,9 +108,10 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 )
             else:
                 severity = SEVERITY_ERROR
+                which = "first" if first_line < entry.line else "other"
                 text = (
                     f"a second distortion entry for {entry.focal:g} mm in the same "
-                    f"calibration (the first is at line {first_line}); liblensfun keeps "
+                    f"calibration (the {which} is at line {first_line}); liblensfun keeps "
                     f"only one of them"
                 )
             finding = replace(
@@ -85,13 +128,16 @@ def duplicate_focals(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
             yield index, Identified(finding, keys, (file.source.file_name,))
 
 
-def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identified]]:
+def duplicate_lenses(
+    read: Sequence[ParsedSource], known: Known | None = None
+) -> Iterable[tuple[int, Identified]]:
     """A ``<lens>`` whose maker, model and crop factor an earlier one has, in any file.
 
     An error, or a warning when the two lenses are identical but for the
-    case and spacing of their names.
+    case and spacing of their names; on the one of the two ``known`` does
+    not have, if only one.
     """
-    first: dict[tuple, tuple[ParsedSource, LensRecord]] = {}
+    first: dict[tuple, tuple[int, ParsedSource, LensRecord]] = {}
     # Contents for duplicates only: they are rare.
     contents: dict[int, list[tuple]] = {}  # the contents of a file's lenses, by id(file)
 
@@ -104,12 +150,23 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
         if file.problem is not None:
             continue
         for lens in file.lenses:
-            key = (normalized_name(lens.maker), normalized_name(lens.model), lens.crop_factor)
-            earlier_file, earlier = first.setdefault(key, (file, lens))
+            key = _lens_key(lens)
+            earlier_index, earlier_file, earlier = first.setdefault(key, (index, file, lens))
             if earlier is lens:
                 continue
             content = content_of(file, lens)
-            where = f"{earlier_file.source.display}:{earlier.line}"
+            first_content = content_of(earlier_file, earlier)
+            here_index, here_file, here = index, file, lens
+            there_file, there = earlier_file, earlier
+            if (
+                known is not None
+                and (key, content) in known.lenses
+                and (key, first_content) not in known.lenses
+            ):
+                # The change added the first: the finding goes there.
+                here_index, here_file, here = earlier_index, earlier_file, earlier
+                there_file, there = file, lens
+            where = f"{there_file.source.display}:{there.line}"
             crop = (
                 f"crop factor {lens.crop_factor:g}"
                 if isinstance(lens.crop_factor, float)
@@ -117,25 +174,26 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 if lens.crop_factor is None
                 else f"crop factor {clip(lens.crop_factor, 20)!r}"
             )
-            name = lens_name(lens.maker, lens.model)
-            if content == content_of(earlier_file, earlier):
+            name = lens_name(here.maker, here.model)
+            if content == first_content:
                 severity = SEVERITY_WARNING
                 text = f"lens {name} ({crop}) is defined identically at {where}: one can go"
             else:
                 severity = SEVERITY_ERROR
+                also = "already" if there is earlier else "also"
                 text = (
-                    f"lens {name} ({crop}) is already defined at {where}; "
+                    f"lens {name} ({crop}) is {also} defined at {where}; "
                     f"liblensfun keeps only one of them"
                 )
             finding = Finding(
                 severity,
                 DUPLICATE_LENS,
-                file.source.display,
-                lens.line,
+                here_file.source.display,
+                here.line,
                 0,
                 clip(text),
-                clip_key((lens.maker, lens.model, lens.crop_factor)),
-                related=((earlier_file.source.display, earlier.line),),
+                clip_key((here.maker, here.model, here.crop_factor)),
+                related=((there_file.source.display, there.line),),
             )
             # The name and the pair of lenses, in either order; then the pair
             # alone, when both were renamed; then the name alone, when one of
@@ -144,11 +202,11 @@ def duplicate_lenses(read: Sequence[ParsedSource]) -> Iterable[tuple[int, Identi
                 severity,
                 DUPLICATE_LENS,
                 lens.crop_factor,
-                *sorted((content, content_of(earlier_file, earlier)), key=repr),
+                *sorted((content, first_content), key=repr),
             )
             keys = ((*pair, key), pair, (severity, DUPLICATE_LENS, key))
-            names = (file.source.file_name, earlier_file.source.file_name)
-            yield index, Identified(finding, keys, names)
+            names = (here_file.source.file_name, there_file.source.file_name)
+            yield here_index, Identified(finding, keys, names)
 
 
 def lens_contents(file: ParsedSource) -> list[tuple]:

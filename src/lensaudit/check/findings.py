@@ -29,7 +29,7 @@ from ..read.records import (
 )
 from ..read.tables import TCA, VIGNETTING
 from .between import folds_between
-from .duplicates import duplicate_focals, duplicate_lenses
+from .duplicates import Known, duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .inversion import inversion_findings
 from .matching import calibration_content, entry_content, file_identified, lens_identity
@@ -78,11 +78,16 @@ def analyse(
 
 
 def analyse_parsed(
-    read: Sequence[ParsedSource], margin: float, verbose: bool, cache: Cache | None = None
+    read: Sequence[ParsedSource],
+    margin: float,
+    verbose: bool,
+    cache: Cache | None = None,
+    known: Known | None = None,
 ) -> tuple[list[CheckedFile], list[Identified]]:
     """:func:`analyse` of files already parsed; findings in file and line order.
     The metrics of a file come from ``cache`` where it has them (see
-    :func:`lensaudit.pipeline.file_metrics`)."""
+    :func:`lensaudit.pipeline.file_metrics`); ``known``, what a baseline
+    holds, places each duplicate on the one of its two the change added."""
     files = [
         CheckedFile(
             f.source.display, f.source.path, f.count, f.problem.message if f.problem else ""
@@ -99,10 +104,10 @@ def analyse_parsed(
             add(index, file_identified(file))
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
-    for index, items in enumerate(file_findings(read, margin, verbose, cache)):
+    for index, items in enumerate(file_findings(read, margin, verbose, cache, known)):
         for item in items:
             add(index, item)
-    for index, item in duplicate_lenses(read):
+    for index, item in duplicate_lenses(read, known):
         add(index, item)
     for index, item in undefined_mounts(read):
         add(index, item)
@@ -111,7 +116,11 @@ def analyse_parsed(
 
 
 def file_findings(
-    read: Sequence[ParsedSource], margin: float, verbose: bool, cache: Cache | None = None
+    read: Sequence[ParsedSource],
+    margin: float,
+    verbose: bool,
+    cache: Cache | None = None,
+    known: Known | None = None,
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
@@ -147,7 +156,7 @@ def file_findings(
             found[index].append(Identified(finding, keys, (read[index].source.file_name,)))
     for index, item in calibration_findings(read, verbose):
         found[index].append(item)
-    for index, item in duplicate_focals(read):
+    for index, item in duplicate_focals(read, known):
         found[index].append(item)
     names = [read[index].source.file_name for index, _ in entries]
     folding = [m is not None and not m.r_normalized >= 1 for m in metrics]
