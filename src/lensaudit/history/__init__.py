@@ -141,7 +141,7 @@ def audit_history(
         git, files, files[newest.hash], (store, index), progress
     )
     states, revisions = introduced.walk(
-        selected, outside, files, first_parent, set(mainline), audits
+        selected, outside, files, first_parent, set(mainline), audits, identities
     )
     result = History(
         repository=Path(repository),

@@ -3,6 +3,13 @@
 Walking the commits parents first, each entry of a changed file inherits the
 introducer of an identical entry (same identity) in its first parent that
 holds one, the same file first; a commit introduces what no parent holds.
+
+A lens renamed, or its crop factor corrected, keeps its calibrations: an
+entry no parent holds inherits the introducer of an entry with the same
+calibration (model, focal length and coefficients) that the same commit
+removed from the previous version of its file, so that the introducer is
+the calibration's commit, not a later clean-up. A calibration copied to a
+new lens while the old one stays is the copy's own.
 """
 
 from __future__ import annotations
@@ -63,9 +70,14 @@ def _find_introducer(ident: int, path: str, parents: list[_State]) -> int | None
 
 
 def _next_state(
-    index: int, files: dict[str, str], parents: list[_State], audits: dict[str, BlobAudit]
+    index: int,
+    files: dict[str, str],
+    parents: list[_State],
+    audits: dict[str, BlobAudit],
+    calibration: list[int],
 ) -> _State:
-    """The file states of commit ``index``, given those of its parents."""
+    """The file states of commit ``index``, given those of its parents
+    (``calibration``: the calibration identity of each entry identity)."""
     first = parents[0] if parents else {}
     state: _State = {}
     for path, blob in files.items():
@@ -84,14 +96,37 @@ def _next_state(
         # Most entries of a changed file are those of its previous version: looked
         # up there directly (where _find_introducer looks first), the others searched.
         known = previous.index() if previous is not None else {}
+        removed: dict[int, int] | None = None  # calibration -> introducer, of entries gone
         introducers = []
         for ident in audit.idents:
             found = known.get(ident)
             if found is None:
                 found = _find_introducer(ident, path, parents)
+            if found is None and previous is not None:
+                if removed is None:
+                    removed = _removed(previous, set(audit.idents), calibration)
+                found = removed.get(calibration[ident])
             introducers.append(index if found is None else found)
         state[path] = _FileState(blob, audit.idents, tuple(introducers))
     return state
+
+
+def _removed(previous: _FileState, kept: set[int], calibration: list[int]) -> dict[int, int]:
+    """The calibration identity of each entry of ``previous`` that is not in
+    ``kept``, with its introducer (the first of each)."""
+    removed: dict[int, int] = {}
+    for ident, introducer in zip(previous.idents, previous.introducers, strict=True):
+        if ident not in kept:
+            removed.setdefault(calibration[ident], introducer)
+    return removed
+
+
+def calibration_identities(identities: list[tuple]) -> list[int]:
+    """For each entry identity (interned, see :func:`~.versions.row_identity`),
+    a small integer for its calibration alone: model, focal length and
+    coefficients, without maker, lens and crop factor."""
+    numbers: dict[tuple, int] = {}
+    return [numbers.setdefault(identity[3:], len(numbers)) for identity in identities]
 
 
 def parents_of(commit: Commit, first_parent: bool) -> tuple[str, ...]:
@@ -106,11 +141,14 @@ def walk(
     first_parent: bool,
     mainline: set[str],
     audits: dict[str, BlobAudit],
+    identities: list[tuple],
 ) -> tuple[dict[str, _State], list[Revision]]:
     """The file states of every commit, walking parents before children, and the
     revisions of the commits that change the database (``files``: {commit:
-    {name: blob id}}). The entries of ``outside`` commits, parents of the first
-    ones examined, count as there before them."""
+    {name: blob id}}; ``identities``: the entry identity of each interned
+    number). The entries of ``outside`` commits, parents of the first ones
+    examined, count as there before them."""
+    calibration = calibration_identities(identities)
     states: dict[str, _State] = {
         p: {
             name: _FileState(blob, audits[blob].idents, (_BEFORE,) * len(audits[blob].idents))
@@ -125,7 +163,8 @@ def walk(
         if parent_hashes and files[parent_hashes[0]] == mine:
             states[commit.hash] = states[parent_hashes[0]]
             continue
-        states[commit.hash] = _next_state(index, mine, [states[p] for p in parent_hashes], audits)
+        parent_states = [states[p] for p in parent_hashes]
+        states[commit.hash] = _next_state(index, mine, parent_states, audits, calibration)
         revisions.append(revision(commit, commit.hash in mainline, mine, audits))
     return states, revisions
 
