@@ -30,6 +30,9 @@ sentence. Errors make the check fail; warnings and notices do not.
 - Metadata Lensfun's own CI does not check (warnings, see
   :mod:`lensaudit.check.metadata`): ``undefined-mount``,
   ``conflicting-calibration``, ``vignetting-starting-values``.
+- Focal series (a warning, see :mod:`lensaudit.check.series`):
+  ``focal-series-outlier``, a distortion entry whose displacement D(r) - r
+  lies far from what its neighbours in focal length predict.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -57,7 +60,8 @@ The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
 checked and the baseline's), :mod:`~lensaudit.check.parsing` (each file
 read once by :mod:`lensaudit.read`, the one reader every command uses),
 :mod:`~lensaudit.check.findings` and :mod:`~lensaudit.check.duplicates` (the
-rules), :mod:`~lensaudit.check.matching` (what the baseline already has) and
+rules, with :mod:`~lensaudit.check.metadata` and :mod:`~lensaudit.check.series`),
+:mod:`~lensaudit.check.matching` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
 :mod:`lensaudit.check_formats`. With ``cache=True``, the reader's tables of
 each file are kept by the content of its bytes (:class:`lensaudit.read.Cache`,
@@ -91,6 +95,7 @@ from .result import (
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
     FILE_CODES,
+    FOCAL_SERIES_OUTLIER,
     FOLD_IN_IMAGE,
     FOLD_NEAR_IMAGE,
     FOLD_OUTSIDE_IMAGE,
@@ -130,6 +135,7 @@ __all__ = [
     "DUPLICATE_FOCAL",
     "DUPLICATE_LENS",
     "FILE_CODES",
+    "FOCAL_SERIES_OUTLIER",
     "FOLD_IN_IMAGE",
     "FOLD_NEAR_IMAGE",
     "FOLD_OUTSIDE_IMAGE",

@@ -2,8 +2,9 @@
 match it against a baseline's (:class:`lensaudit.check.result.Identified`).
 
 Input problems and folds of the distortion entries, the vignetting and TCA
-audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`)
-and the metadata Lensfun's own CI does not check (:mod:`lensaudit.check.metadata`).
+audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`),
+the metadata Lensfun's own CI does not check (:mod:`lensaudit.check.metadata`)
+and the entries that break their lens's focal series (:mod:`lensaudit.check.series`).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ from .result import (
     entry_finding,
     entry_key,
 )
+from .series import series_outliers
 
 _STATUS_CODES = {
     STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
@@ -112,8 +114,8 @@ def file_findings(
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
-    calibrations and vignetting at the calibration script's starting values
-    (none for a file with a file-level problem)."""
+    calibrations, vignetting at the calibration script's starting values and
+    focal-series outliers (none for a file with a file-level problem)."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
@@ -138,6 +140,8 @@ def file_findings(
     for index, item in calibration_findings(read, verbose):
         found[index].append(item)
     for index, item in duplicate_focals(read):
+        found[index].append(item)
+    for index, item in series_outliers(read):
         found[index].append(item)
     for index, file in enumerate(read):
         found[index] += conflicting_calibrations(file)
