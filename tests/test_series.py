@@ -3,16 +3,22 @@ smooth course of its lens's calibration over focal length (a warning)."""
 
 from __future__ import annotations
 
+import importlib.util
 import math
+import os
 import random
+import subprocess
+import sys
 from fractions import Fraction
 from pathlib import Path
 
 import pytest
 
+from conftest import GIT_ENVIRONMENT
 from lensaudit.check import check
 from lensaudit.check.series import displacement
 
+ROOT = Path(__file__).resolve().parents[1]
 CODE = "focal-series-outlier"
 #: k1 of a smooth poly3 series: -0.02 at 18 mm, rising by 0.01 per unit of ln(focal).
 FOCALS = (18, 24, 35, 50, 70, 105)
@@ -259,3 +265,73 @@ def test_the_outliers_on_real_data_are_the_independent_ones(which, bundled_db, l
     }
     assert found == expected
     assert len(found) == 5  # docs/ci.md quotes the count and names them
+
+
+# -- scripts/series_history.py on a hand-made history ----------------------------
+
+
+def load_script(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+def commit_database(repository: Path, date: str, *lenses: list[str]) -> None:
+    """Commit data/db/db.xml holding ``lenses`` (see :func:`database`) at ``date``."""
+    database(repository / "data" / "db", *lenses)
+    environment = {**os.environ, **GIT_ENVIRONMENT,
+                   "GIT_AUTHOR_DATE": date, "GIT_COMMITTER_DATE": date}  # fmt: skip
+    for words in (["add", "data/db/db.xml"], ["commit", "-qm", date]):
+        subprocess.run(["git", "-C", str(repository), *words], check=True, env=environment)
+
+
+@pytest.fixture
+def series_history_repository(tmp_path) -> Path:
+    repository = tmp_path / "lensfun"
+    repository.mkdir()
+    subprocess.run(["git", "-C", str(repository), "init", "-q"], check=True)
+    spiked_a, spiked_d = series(spike_at=50), series(spike_at=70)
+    smooth, three = series(), series(focals=(18, 24, 35))
+    # R: Zoom 0 and Zoom 3 have an outlier each (at 50 and 70 mm).
+    commit_database(repository, "2021-05-30T12:00:00+00:00", spiked_a, smooth, three, spiked_d)
+    # Corrects Zoom 0 at 50 mm: (a) one of two corrected, (b) a correction, flagged.
+    commit_database(repository, "2021-06-10T12:00:00+00:00", smooth, smooth, three, spiked_d)
+    # Changes two entries of Zoom 1: a correction, not flagged.
+    zoom1 = smooth[:]
+    zoom1[1], zoom1[2] = poly3(24, 0.001), poly3(35, 0.002)
+    commit_database(repository, "2021-07-01T12:00:00+00:00", smooth, zoom1, three, spiked_d)
+    # The middle of a series of three: a correction, not flagged (never judged).
+    three_changed = [three[0], poly3(24, -0.01), three[2]]
+    commit_database(repository, "2021-08-01T12:00:00+00:00", smooth, zoom1, three_changed, spiked_d)
+    # Three entries of one series at once, and one added to another: not corrections.
+    zoom0 = [poly3(f, smooth_k1(f) + 0.001) if f < 40 else poly3(f, smooth_k1(f)) for f in FOCALS]
+    more = [*three_changed, poly3(50, 0.0)]
+    commit_database(repository, "2021-09-01T12:00:00+00:00", zoom0, zoom1, more, spiked_d)
+    return repository
+
+
+def test_series_history_counts_a_hand_made_history(series_history_repository):
+    series_history = load_script("series_history")
+    found = series_history.measure(series_history_repository, "2021-05-30")
+    # (a) Zoom 0 at 50 mm and Zoom 3 at 70 mm are flagged at R; only the first is corrected.
+    flagged = sorted((e.identity[1], e.identity[3][0], c is not None) for e, c in found.flagged)
+    assert flagged == [("zoom0", 50.0, True), ("zoom3", 70.0, False)]
+    # (b) three series corrections (Zoom 0, Zoom 1, Zoom 2), one flagged at its parent.
+    assert [(lens, size, hit) for _, lens, size, hit in found.corrections] == [
+        ("zoom0", 6, True),
+        ("zoom1", 6, False),
+        ("zoom2", 3, False),
+    ]
+    assert "(a) flagged at R: 2, corrected later: 1" in series_history.table(found)
+
+
+def test_the_revision_is_the_last_commit_of_that_day(series_history_repository):
+    series_history = load_script("series_history")
+    first = subprocess.run(
+        ["git", "-C", str(series_history_repository), "rev-list", "--max-parents=0", "HEAD"],
+        capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    assert series_history.revision_at(series_history_repository, "2021-05-30") == first
+    assert series_history.revision_at(series_history_repository, "2021-06-09") == first
