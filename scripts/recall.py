@@ -7,9 +7,10 @@
 A calibration element is a ``<distortion>``, ``<tca>`` or ``<vignetting>``
 of a lens. It is identified by its kind, its lens (maker and model, without
 case or white space, and crop factor) and its calibration point (focal
-length; with aperture and distance for vignetting); its values are the rest
-of what it holds (model, coefficients, aspect ratio, ...), numbers compared
-as numbers.
+length; with aperture and distance for vignetting); its values are its
+model and coefficients (and whether it loads), numbers compared as numbers:
+a commit that only adds a lens type, an aspect ratio or a real focal length
+corrects nothing.
 
 For each first-parent commit C with parent P that changes a ``*.xml`` file
 of the database directory, the elements of the changed files at P are
@@ -75,16 +76,23 @@ from lensaudit.read.tables import SPECS, TCA, VIGNETTING  # noqa: E402
 DB_DIR = "data/db"
 DISTORTION = "distortion"
 KINDS = (DISTORTION, TCA, VIGNETTING)
-#: Fields of a distortion entry that are its values (the rest is where it is and what it is for).
-DISTORTION_VALUES = ("model", "a", "b", "c", "k1", "k2", "aspect_ratio", "real_focal", "type")
-_PLACE = frozenset({"line", "maker", "lens", "crop_factor", "focal", "aperture", "distance"})
+#: The values of each kind: its model and coefficients (not its lens type,
+#: aspect ratio or real focal length, which metadata commits add or fix).
+VALUES = {
+    DISTORTION: ("model", "a", "b", "c", "k1", "k2", "status"),
+    **{
+        kind: ("model", *(f for f in spec.fields if f not in ("aperture", "distance")), "status")
+        for kind, spec in SPECS.items()
+    },
+}
 _GIT_ENVIRONMENT = {"GIT_OPTIONAL_LOCKS": "0", "GIT_TERMINAL_PROMPT": "0", "LC_ALL": "C"}
 
 
 @dataclass(frozen=True)
 class Element:
     """One calibration element of a file: kind, identity (see the module's
-    docstring), values, file (as shown), line, and its lens's index in the file."""
+    docstring), values, file (as shown), line, its lens's index in the file
+    and its aspect ratio (None if not a number)."""
 
     kind: str
     identity: tuple
@@ -92,6 +100,7 @@ class Element:
     file: str
     line: int
     lens: int | None
+    aspect: float | None = None
 
     @property
     def point(self) -> tuple:
@@ -135,8 +144,9 @@ def elements(file: ParsedSource) -> list[Element]:
     for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
         identity = (identity_name(entry.maker), identity_name(entry.lens),
                     _number(entry.crop_factor), (_number(entry.focal),))  # fmt: skip
-        values = tuple(_number(getattr(entry, name)) for name in DISTORTION_VALUES)
-        found.append(Element(DISTORTION, identity, values, display, entry.line, lens))
+        values = tuple(_number(getattr(entry, name)) for name in VALUES[DISTORTION])
+        aspect = _number(entry.aspect_ratio)
+        found.append(Element(DISTORTION, identity, values, display, entry.line, lens, aspect))
     if file.problem is not None:
         return found
     tables = file.tables
@@ -151,8 +161,9 @@ def elements(file: ParsedSource) -> list[Element]:
             identity = (identity_name(record["maker"]), identity_name(record["lens"]),
                         _number(record["crop_factor"]),
                         tuple(_number(record[n]) for n in point_names))  # fmt: skip
-            values = tuple(_number(v) for n, v in record.items() if n not in _PLACE)
-            found.append(Element(kind, identity, values, display, record["line"], lens))
+            values = tuple(_number(record[name]) for name in VALUES[kind])
+            aspect = _number(record["aspect_ratio"])
+            found.append(Element(kind, identity, values, display, record["line"], lens, aspect))
     return found
 
 

@@ -41,9 +41,6 @@ from lensaudit.check.parsing import ParsedSource  # noqa: E402
 from lensaudit.check.series import series_outliers  # noqa: E402
 from recall import DISTORTION, Element, changes, elements, git, whole_database  # noqa: E402
 
-#: Where the aspect ratio is among a distortion element's values (recall.DISTORTION_VALUES).
-_ASPECT = 6
-
 
 @dataclass
 class SeriesHistory:
@@ -80,7 +77,7 @@ def _series(found: Sequence[Element]) -> dict[tuple, dict]:
         if element.kind != DISTORTION:
             continue
         name = element.file.split(":", 1)[-1]
-        key = (name, *element.identity[:3], element.values[_ASPECT])
+        key = (name, *element.identity[:3], element.aspect)
         groups[key].setdefault(element.identity[3], element)
     return groups
 
@@ -135,6 +132,8 @@ def table(found: SeriesHistory) -> str:
         f"(b) series corrections after R: {len(found.corrections)} "
         f"({len(judged)} in series of 4 or more), flagged at the parent: {hits}"
     )
+    for commit, lens, size, hit in found.corrections:
+        lines.append(f"    {commit[:7]} {lens}, a series of {size}: {'flagged' if hit else '-'}")
     return "\n".join(lines)
 
 
