@@ -39,6 +39,9 @@ sentence. Errors make the check fail; warnings and notices do not.
   ``inversion-fails-in-image`` where liblensfun's reverse transform cannot
   invert the model by its Newton steps inside the image (not reported for an
   entry that is ``fold-in-image``).
+- Focal series (a warning, see :mod:`lensaudit.check.series`):
+  ``focal-series-outlier``, a distortion entry whose displacement D(r) - r
+  lies far from what its neighbours in focal length predict.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -66,7 +69,8 @@ The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
 checked and the baseline's), :mod:`~lensaudit.check.parsing` (each file
 read once by :mod:`lensaudit.read`, the one reader every command uses),
 :mod:`~lensaudit.check.findings` and :mod:`~lensaudit.check.duplicates` (the
-rules), :mod:`~lensaudit.check.matching` (what the baseline already has) and
+rules, with :mod:`~lensaudit.check.metadata` and :mod:`~lensaudit.check.series`),
+:mod:`~lensaudit.check.matching` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
 :mod:`lensaudit.check_formats`. With ``cache=True``, the reader's tables of
 each file are kept by the content of its bytes (:class:`lensaudit.read.Cache`,
@@ -101,6 +105,7 @@ from .result import (
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
     FILE_CODES,
+    FOCAL_SERIES_OUTLIER,
     FOLD_BETWEEN_CALIBRATIONS,
     FOLD_IN_IMAGE,
     FOLD_NEAR_IMAGE,
@@ -142,6 +147,7 @@ __all__ = [
     "DUPLICATE_FOCAL",
     "DUPLICATE_LENS",
     "FILE_CODES",
+    "FOCAL_SERIES_OUTLIER",
     "FOLD_BETWEEN_CALIBRATIONS",
     "FOLD_IN_IMAGE",
     "FOLD_NEAR_IMAGE",

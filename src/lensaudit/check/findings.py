@@ -2,9 +2,11 @@
 match it against a baseline's (:class:`lensaudit.check.result.Identified`).
 
 Input problems, folds and failed inversions (:mod:`lensaudit.check.inversion`)
-of the distortion entries, the vignetting and TCA
-audits' findings, then the duplicates (:mod:`lensaudit.check.duplicates`)
-and the metadata Lensfun's own CI does not check (:mod:`lensaudit.check.metadata`).
+of the distortion entries, the vignetting and TCA audits' findings, then the
+duplicates (:mod:`lensaudit.check.duplicates`), the zooms' folds between
+calibrations (:mod:`lensaudit.check.between`), the metadata Lensfun's own CI
+does not check (:mod:`lensaudit.check.metadata`) and the entries that break
+their lens's focal series (:mod:`lensaudit.check.series`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ from .result import (
     entry_finding,
     entry_key,
 )
+from .series import series_outliers
 
 _STATUS_CODES = {
     STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
@@ -124,8 +127,8 @@ def file_findings(
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
-    calibrations and vignetting at the calibration script's starting values
-    (none for a file with a file-level problem)."""
+    calibrations, vignetting at the calibration script's starting values and
+    focal-series outliers (none for a file with a file-level problem)."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
@@ -162,6 +165,8 @@ def file_findings(
     folding = [m is not None and not m.r_normalized >= 1 for m in metrics]
     for position, item in folds_between([e for _, e in entries], corners, folding, names, verbose):
         found[entries[position][0]].append(item)
+    for index, item in series_outliers(read):
+        found[index].append(item)
     for index, file in enumerate(read):
         found[index] += conflicting_calibrations(file)
         found[index] += starting_values(file)

@@ -106,7 +106,9 @@ def check(
       calibrations of one lens for the same focal length, aperture and
       distance; liblensfun uses the first); vignetting-starting-values
       (k1=-0.3, k2=0, k3=0: the calibration script's start);
-      duplicate-lens and duplicate-focal when the two are identical.
+      focal-series-outlier (a distortion entry far from what its
+      neighbours in focal length predict); duplicate-lens and
+      duplicate-focal when the two are identical.
     Notices: baseline-unreadable (how a baseline file that cannot be parsed
       was replaced).
     Notices with --verbose: fold-outside-image (any other finite r_max),
