@@ -175,23 +175,23 @@ def conflicting_calibrations(file: ParsedSource) -> Iterable[Identified]:
     tables = file.tables
     lens_of = {VIGNETTING: tables.lens_of_vignetting, TCA: tables.lens_of_tca}
     for kind, records in file.calibrations.items():
-        first: dict[tuple, Any] = {}
+        # Keys from the columns; entry objects only for the repeats (a file has thousands).
+        first: dict[tuple, int] = {}
         statuses = records.column("status")
+        crops = records.column("crop_factor")
+        names = ("focal", "aperture", "distance") if kind == VIGNETTING else ("focal",)
+        points = list(zip(*(records.column(name) for name in names), strict=True))
         for position, lens in enumerate(lens_of[kind] or ()):
             if lens is None or statuses[position] != STATUS_OK:
                 continue
-            entry = records[position]
-            point = (
-                (entry.focal, entry.aperture, entry.distance)
-                if kind == VIGNETTING
-                else (entry.focal,)
-            )
-            earlier = first.setdefault((lens, entry.crop_factor, point), entry)
-            if earlier is entry:
+            earlier_position = first.setdefault((lens, crops[position], points[position]), position)
+            if earlier_position == position:
                 continue
+            entry, earlier = records[position], records[earlier_position]
             if _coefficients(kind, entry) == _coefficients(kind, earlier):
                 continue
             content, first_content = calibration_content(entry), calibration_content(earlier)
+            point = points[position]
             yield _conflict(file, kind, entry, earlier.line, point, content, first_content)
 
 
