@@ -504,3 +504,26 @@ def test_a_duplicate_lens_written_above_the_old_one_is_reported_on_the_new_one(t
     (finding,) = check(tmp_path / "after", baseline=tmp_path / "before").findings
     assert (finding.code, finding.line, finding.known) == ("duplicate-lens", 2, False)
     assert finding.related == ((finding.file, 3),) and "also defined at" in finding.message
+
+
+def test_a_new_twin_above_an_old_one_with_tca_is_placed_the_same_from_the_cache(tmp_path):
+    """A <tca> record leaves fields out (NaN in its row): the baseline's lens
+    must still be recognised, however the two readings were made (cold, or
+    from the cache)."""
+
+    def lens(k1: str) -> str:
+        return (
+            "  <lens><maker>M</maker><model>Twin</model><mount>X</mount>"
+            f'<cropfactor>1</cropfactor><calibration><distortion model="poly3" focal="20" '
+            f'k1="{k1}"/><tca model="poly3" focal="20" vr="1.0002" vb="0.9998"/>'
+            "</calibration></lens>\n"
+        )
+
+    for name, lenses in (("before", [lens("0.01")]), ("after", [lens("0.02"), lens("0.01")])):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "db.xml").write_text(
+            '<lensdatabase version="2">\n' + "".join(lenses) + "</lensdatabase>\n"
+        )
+    for run in ("cold", "warm"):
+        result = check(tmp_path / "after", baseline=tmp_path / "before", cache=True)
+        assert [(f.code, f.line) for f in result.findings] == [("duplicate-lens", 2)], run

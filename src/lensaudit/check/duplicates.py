@@ -225,7 +225,9 @@ def lens_contents(file: ParsedSource) -> list[tuple]:
                          (tables.tca, tables.lens_of_tca)):  # fmt: skip
         for row, lens in zip(rows or (), lenses or (), strict=True):
             if lens is not None:
-                calibrations[lens].append(row[3:])  # without line, maker and lens
+                # Without line, maker and lens; NaN (a field left out) as None, so
+                # that equal contents compare equal whichever reading made them.
+                calibrations[lens].append(tuple(None if v != v else v for v in row[3:]))
     return [
         (lens.content, tuple(own), tuple(more))
         for lens, own, more in zip(file.lenses, entries, calibrations, strict=True)
