@@ -98,6 +98,9 @@ def check(
       vignetting-zero-in-image  C(r) <= 0 inside the image: the
                            correction divides by zero or flips sign
       tca-fold-in-image    a colour channel folds inside the image
+      fold-between-calibrations  a zoom's model, as liblensfun
+                           interpolates it between two calibrations
+                           that do not fold, folds inside the image
     Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
       vignetting-low-in-image (C(r) < 0.1 inside the image);
       vignetting-brightens (C(r) > 1.05 inside the image: brighter
@@ -108,7 +111,9 @@ def check(
       (k1=-0.3, k2=0, k3=0: the calibration script's start);
       focal-series-outlier (a distortion entry far from what its
       neighbours in focal length predict); duplicate-lens and
-      duplicate-focal when the two are identical.
+      duplicate-focal when the two are identical;
+      inversion-fails-in-image (liblensfun's reverse transform cannot
+      invert the model by its Newton steps inside the image).
     Notices: baseline-unreadable (how a baseline file that cannot be parsed
       was replaced).
     Notices with --verbose: fold-outside-image (any other finite r_max),
