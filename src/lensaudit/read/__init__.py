@@ -19,7 +19,7 @@ from collections.abc import Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
-from . import parallel, paths, xml
+from . import liblensfun, parallel, paths, xml
 from .cache import Cache, content_digest
 from .paths import DatabaseSource, Paths, display_path, expand, resolve
 from .records import (
@@ -238,10 +238,22 @@ def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None
             lens_of_tca = [None, *lens_of_tca]  # type: ignore[misc]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
               found.lenses, distortion, lens_of_row, omitted, found.cameras,
-              found.mount_names)  # fmt: skip
+              found.mount_names, _refusal(data, parsed, found))  # fmt: skip
     if not calibrations:
         return stored, None
     return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)
+
+
+def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, str, int] | None:
+    """Where liblensfun stops reading a file, why, and how many lenses it holds
+    then (see :attr:`FileTables.refusal`)."""
+    leading = liblensfun.leading_refusal(data)
+    refusal = (*leading, 0) if leading is not None else found.first_refusal()
+    if parsed.status == xml.STATUS_XML_ERROR and (refusal is None or refusal[0] >= parsed.line):
+        # What comes first is the markup itself (GMarkup refuses it too).
+        kept = sum(lens[0] < parsed.line for lens in found.lenses)
+        return parsed.line, f"{liblensfun.NOT_WELL_FORMED}: {parsed.problem}", kept
+    return refusal
 
 
 def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
@@ -255,7 +267,7 @@ def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
 def unreadable(name: str, path: Path | None, message: str) -> FileTables:
     """The tables of a file that could not be read: one row that says why."""
     values = (STATUS_UNREADABLE, 0, 0, message, message, [],
-              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [])  # fmt: skip
+              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [], None)  # fmt: skip
     tables = FileTables(name, path, b"", values)
     tables.set_calibrations(
         (

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from operator import itemgetter
 
+from .liblensfun import piece_refusal, root_refusal
 from .records import (
     DEFAULT_ASPECT_RATIO,
     DEFAULT_CROP_FACTOR,
@@ -542,9 +543,29 @@ class FileReader:
         self.lens_of_tca: list[int | None] | None = [] if calibrations else None
         self.cameras: list[tuple] = []
         self.mount_names: list[tuple[int, str]] = []
+        #: Where liblensfun stops reading the pieces so far, why, and how many of
+        #: the lenses before it holds: (line, reason, lenses kept), or None.
+        self.refusal: tuple[int, str, int] | None = None
+        self._root_refusal: tuple[int, str, int] | None = None
+
+    def root(self, element: etree._Element, line: int) -> None:
+        """Judge the document's root element, whose start tag ends on ``line``
+        (liblensfun reads it before any piece)."""
+        found = root_refusal(element, line)
+        self._root_refusal = (*found, 0) if found is not None else None
+
+    def first_refusal(self) -> tuple[int, str, int] | None:
+        """Where liblensfun stops reading the document, why, and the number of
+        lenses it holds then; None if it reads every piece (see
+        :mod:`lensaudit.read.liblensfun`)."""
+        return self._root_refusal or self.refusal
 
     def add(self, piece: etree._Element, line_of: LineOf) -> None:
         """Read one piece of the document."""
+        if self.refusal is None:
+            found = piece_refusal(piece, line_of)
+            if found is not None:  # liblensfun holds the lenses of the pieces before
+                self.refusal = (*found, len(self.lenses))
         if piece.tag == "camera":
             self.cameras.append(read_camera(piece, line_of))
         elif piece.tag == "mount":
@@ -573,10 +594,12 @@ class FileReader:
 
     def taken(self) -> tuple | None:
         """The tables read so far, for :meth:`extend` into another reader; None
-        if a row is not ``ok`` (its message may name a line)."""
+        if a row is not ``ok`` (its message may name a line) or liblensfun
+        refuses what was read."""
         tables = self._tables()
         if (
-            any(row[_LENS_PROBLEM] for row in self.lenses)
+            self.refusal is not None
+            or any(row[_LENS_PROBLEM] for row in self.lenses)
             or any(row[-2] != STATUS_OK for rows in tables[1:4] if rows for row in rows)
             or any(None in lens_of for lens_of in tables[4:7] if lens_of)
         ):

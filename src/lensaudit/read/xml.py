@@ -166,6 +166,7 @@ def parse(
 
 def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed, V]:
     """What a well-formed document whose root is ``root`` is: a database or not."""
+    _judge_root(root, visiting, lines)
     if root.tag != DATABASE_ROOT:
         tag = root.tag if isinstance(root.tag, str) else "?"
         if len(tag) > 40:
@@ -174,6 +175,13 @@ def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed,
         line = lines.first if lines is not None else root.sourceline or 1
         return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
     return Parsed(), visiting
+
+
+def _judge_root(root: Any, visiting: Any, lines: _Lines | None) -> None:
+    """Hand the root element to a visitor that judges it (``root(element, line)``)."""
+    judge = getattr(visiting, "root", None)
+    if judge is not None:
+        judge(root, lines.first if lines is not None else root.sourceline or 1)
 
 
 class Pieces:
@@ -221,7 +229,7 @@ class Pieces:
             and b"xmlns" not in data
             and _PLACE not in data
             and not _declares(data)
-            and _root_name(data) not in read
+            and _root_name(data) == DATABASE_ROOT
         )
 
     def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
@@ -263,7 +271,8 @@ class Pieces:
 
         found = _UNUSABLE
         try:
-            root = etree.fromstring(b"<r>" + piece + b"</r>", parser())
+            # In a root like the document's: liblensfun judges a lens by its parent.
+            root = etree.fromstring(b"<lensdatabase>" + piece + b"</lensdatabase>", parser())
         except etree.XMLSyntaxError:
             root = None
         # The bytes start with "<lens" and end with ">": one child, one element.
@@ -427,6 +436,7 @@ def _recovered(
         root.getroottree().docinfo.clear()
         if b"xmlns" in data:
             _use_local_names(root)
+        _judge_root(root, visiting, None)
         _visit_tree(root, visiting, read, _line_getter(None, root))
     return Parsed(STATUS_XML_ERROR, line, column, problem), visiting
 
