@@ -40,6 +40,7 @@ BASELINE_UNREADABLE = "baseline-unreadable"
 UNDEFINED_MOUNT = "undefined-mount"
 CONFLICTING_CALIBRATION = "conflicting-calibration"
 VIGNETTING_STARTING_VALUES = "vignetting-starting-values"
+LIBLENSFUN_REFUSES = "liblensfun-refuses"
 
 #: Findings about a whole file.
 FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
