@@ -251,7 +251,11 @@ def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, s
     refusal = (*leading, 0) if leading is not None else found.first_refusal()
     if parsed.status == xml.STATUS_XML_ERROR and (refusal is None or refusal[0] >= parsed.line):
         # What comes first is the markup itself (GMarkup refuses it too).
-        kept = sum(lens[0] < parsed.line for lens in found.lenses)
+        # The lenses ended before the error's position, which liblensfun holds.
+        offset = 0
+        for _ in range(parsed.line - 1):
+            offset = data.find(b"\n", offset) + 1
+        kept = data.count(b"</lens>", 0, offset + max(parsed.column - 1, 0)) if offset >= 0 else 0
         return parsed.line, f"{liblensfun.NOT_WELL_FORMED}: {parsed.problem}", kept
     return refusal
 
