@@ -247,7 +247,9 @@ def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None
 def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, str, int] | None:
     """Where liblensfun stops reading a file, why, and how many lenses it holds
     then (see :attr:`FileTables.refusal`)."""
-    leading = liblensfun.leading_refusal(data)
+    # libxml2 has read a well-formed document as UTF-8 unless it declares another encoding.
+    utf8_checked = parsed.status == STATUS_OK and not xml.declares_other_encoding(data)
+    leading = liblensfun.leading_refusal(data, utf8_checked)
     refusal = (*leading, 0) if leading is not None else found.first_refusal()
     if parsed.status == xml.STATUS_XML_ERROR and (refusal is None or refusal[0] >= parsed.line):
         # What comes first is the markup itself (GMarkup refuses it too).

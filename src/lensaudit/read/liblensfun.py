@@ -28,10 +28,22 @@ not accept:
 Lines are those GMarkup reports: where it stands when it gives up, that is
 just past the ``>`` of the start or end tag at fault, or at the ``<`` that
 ends a text (a line break right after a ``>`` already counts as the next
-line). What is not seen here: focal lengths liblensfun guesses from a lens's
-name (only those of its calibrations are used), text inside CDATA sections
+line). Numbers are read as C's ``atof`` reads them (hexadecimal included)
+and kept in single precision; where a lens does not give its focal length
+or aperture range, it is guessed from its model's name and calibrations as
+liblensfun guesses it. What is not seen here: text inside CDATA sections
 (GMarkup skips it; lxml gives it as text), the tails of the children of a
-root other than ``<lensdatabase>``.
+root other than ``<lensdatabase>``, the ``lang=`` of an empty element (which
+liblensfun applies to the next text it reads).
+
+Walking every element in Python would cost more than reading the file, so
+:func:`shaped_until` first looks at the file's bytes at once: up to the
+line it gives, every top-level element has a shape liblensfun accepts
+whatever its values (known elements in their places, known attributes,
+known ``model=`` and ``<type>`` values, positive crop factors, no text
+where none may stand). Of such an element only the values a reader's
+record holds are left to judge (:func:`lens_accepted`,
+:func:`camera_accepted`, :func:`mount_accepted`); anything else is walked.
 """
 
 from __future__ import annotations
@@ -43,7 +55,7 @@ import struct
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Sequence
     from typing import Any
 
 #: What a refusal is: (line, reason), the reason in liblensfun's terms.
@@ -145,18 +157,35 @@ LENS_TYPES = frozenset(
 _FLT_MAX = 3.4028234663852886e38
 _FLT_MIN = 1.1754943508222875e-38
 
-# C's strtod/atof: the longest prefix that is a number, else 0.
+# C's strtod/atof: the longest prefix that is a number (decimal, hexadecimal,
+# infinity or NaN), else 0.
 _ATOF = re.compile(
-    r"[ \t\n\v\f\r]*([+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf(?:inity)?|nan))",
+    r"[ \t\n\v\f\r]*([+-]?)"
+    r"(?:(0[xX](?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)(?:[pP][+-]?\d+)?)"
+    r"|((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(inf(?:inity)?|nan(?:\([0-9A-Za-z_]*\))?))",
     re.IGNORECASE | re.ASCII,
 )
 _ATOI = re.compile(r"[ \t\n\v\f\r]*([+-]?\d+)", re.ASCII)
 
 
 def atof(text: str) -> float:
-    """A text as C's ``atof`` reads it: its longest numeric prefix, else 0."""
+    """A text as C's ``atof`` reads it: its longest numeric prefix (``"0x10"``
+    is 16, ``"2.8/50"`` is 2.8), else 0."""
     found = _ATOF.match(text)
-    return float(found.group(1)) if found else 0.0
+    if found is None:
+        return 0.0
+    sign, hexadecimal, decimal, special = found.groups()
+    if decimal is not None:
+        value = float(decimal)
+    elif special is not None:
+        value = math.inf if special[0] in "iI" else math.nan
+    else:
+        digits = hexadecimal[2:]
+        try:
+            value = float.fromhex(digits if "p" in digits.lower() else digits + "p0")
+        except OverflowError:
+            value = math.inf
+    return -value if sign == "-" else value
 
 
 def atoi(text: str) -> int:
@@ -182,22 +211,26 @@ def stripped(text: str | None) -> str:
     return text.lstrip(_SPACE) if text else ""
 
 
-def leading_refusal(data: bytes) -> Refusal | None:
+def leading_refusal(data: bytes, utf8_checked: bool = False) -> Refusal | None:
     """Where GMarkup refuses a file before any element: one that does not
     start with ``<`` after white space (a byte-order mark, say), or (in a
-    file that is otherwise well-formed) bytes that are not UTF-8."""
-    start = len(data) - len(data.lstrip(b" \t\n\r"))
+    file that is otherwise well-formed) bytes that are not UTF-8; with
+    ``utf8_checked``, the bytes are known to be UTF-8 already."""
+    start = _LEADING_SPACE.match(data).end()  # type: ignore[union-attr]
     if start < len(data) and data[start] != 0x3C:  # "<"
         line = data.count(b"\n", 0, start) + 1
         what = "a byte-order mark" if data.startswith(b"\xef\xbb\xbf") else "text"
         return line, f"the file starts with {what}, not with an element"
-    if not data.isascii():
+    if not utf8_checked and not data.isascii():
         try:
             data.decode("utf-8")
         except UnicodeDecodeError as error:
             line = data.count(b"\n", 0, error.start) + 1
             return line, f"byte 0x{data[error.start]:02X} is not UTF-8"
     return None
+
+
+_LEADING_SPACE = re.compile(rb"[ \t\n\r]*+")
 
 
 def root_refusal(root: Any, line: int) -> Refusal | None:
@@ -284,11 +317,16 @@ def _after_start(element: Any, line: int) -> int:
 class _Definition:
     """What liblensfun has gathered of the lens, camera or mount being read."""
 
-    __slots__ = ("kind", "texts", "focal", "aperture", "crop", "aspect", "calibrated", "guesses")
+    __slots__ = (
+        "kind", "texts", "model", "focal", "aperture", "crop", "aspect", "calibrated", "guesses",
+    )  # fmt: skip
 
     def __init__(self, kind: str) -> None:
         self.kind = kind
         self.texts: set[str] = set()  # the elements that gave a text
+        # The lens's model as liblensfun keeps it: the last text without lang=,
+        # or, before any, the language code of the first translation.
+        self.model: str | None = None
         self.focal = [0.0, 0.0]
         self.aperture = [0.0, 0.0]
         # The camera's crop factor starts at 0, the lens's at 1 (aspect ratio 1.5).
@@ -318,15 +356,17 @@ class _Definition:
                 number = single(atof(aperture)) if aperture is not None else 0.0
                 self.guesses.append(("aperture", number))
 
-    def text(self, name: str, text: str) -> str | None:
-        """Take a text of element ``name``; why liblensfun refuses it, or None."""
+    def text(self, name: str, text: str, lang: str | None) -> str | None:
+        """Take a text of element ``name`` (with its ``lang=``); why liblensfun
+        refuses it, or None."""
         self.texts.add(name)
-        if name == "cropfactor":
+        if name == "model":
+            if lang is None or self.model is None:
+                self.model = text if lang is None else lang
+        elif name == "cropfactor":
             self.crop = single(atof(text))
         elif name == "aspect-ratio" and self.kind == "lens":
-            numerator, colon, denominator = text.partition(":")
-            ratio = _ratio(atof(numerator), atof(denominator)) if colon else atof(text)
-            self.aspect = single(ratio)
+            self.aspect = _aspect_ratio(text)
         elif name == "type" and " ".join(text.split()).lower() not in LENS_TYPES:
             return f"lens type {_clip(text.strip())!r} is not one liblensfun knows"
         return None
@@ -360,24 +400,97 @@ class _Definition:
 
     def _guessed(self) -> tuple[list[float], list[float]]:
         """Focal length and aperture ranges after liblensfun fills in those not
-        given from the calibrations (``lfLens::GuessParameters``)."""
+        given from the model's name and the calibrations
+        (``lfLens::GuessParameters``)."""
         focal, aperture = list(self.focal), list(self.aperture)
-        if not aperture[0] or not focal[0]:
-            ranges = {"focal": [_FLT_MAX, _FLT_MIN], "aperture": [_FLT_MAX, _FLT_MIN]}
-            for what, value in self.guesses:
-                low_high = ranges[what]
-                if value < low_high[0]:
-                    low_high[0] = value
-                if value > low_high[1]:
-                    low_high[1] = value
-            for pair, (low, high) in ((focal, ranges["focal"]), (aperture, ranges["aperture"])):
-                if low != _FLT_MAX and not pair[0]:
-                    pair[0] = low
-                if high != _FLT_MIN and not pair[1]:
-                    pair[1] = high
+        if aperture[0] and focal[0]:
+            if not focal[1]:
+                focal[1] = focal[0]
+            return focal, aperture
+        low_focal, high_focal = _FLT_MAX, _FLT_MIN
+        low_aperture, high_aperture = _FLT_MAX, _FLT_MIN
+        named = name_guess(self.model) if self.model is not None else None
+        if named is not None:
+            low, high, widest = named
+            low_focal = low if low is not None else low_focal
+            high_focal = high if high is not None else high_focal
+            low_aperture = widest if widest is not None else low_aperture
+        for what, value in self.guesses:
+            if what == "focal":
+                low_focal = value if value < low_focal else low_focal
+                high_focal = value if value > high_focal else high_focal
+            else:
+                low_aperture = value if value < low_aperture else low_aperture
+                high_aperture = value if value > high_aperture else high_aperture
+        for pair, low, high in (
+            (focal, low_focal, high_focal),
+            (aperture, low_aperture, high_aperture),
+        ):
+            if low != _FLT_MAX and not pair[0]:
+                pair[0] = low
+            if high != _FLT_MIN and not pair[1]:
+                pair[1] = high
         if not focal[1]:
             focal[1] = focal[0]
         return focal, aperture
+
+
+#: Models whose name liblensfun does not guess from.
+_NOT_GUESSED = ("adapter", "reducer", "booster", "extender", "converter", "magnifier")
+# liblensfun's patterns for a model name (``lens.cpp``), matched against the
+# whole name in bytes as ``std::regex`` does: "." takes no line end, and
+# [[:space:]] is C's white space. Each: the groups of min focal, max focal
+# and min aperture. ("[0.9]" is liblensfun's own, a class of "0", "." and "9".)
+_ANY = rb"[^\n\r]"
+_C_SPACE = rb"[ \t\n\v\f\r]"
+_EXTENDER = re.compile(_ANY + rb"*?[0-9](\.[0.9]+)?x" + _ANY + rb"*")
+_NAME_PATTERNS = (
+    (
+        re.compile(
+            rb"[^:]*?([0-9]+[0-9.]*)[-]?([0-9]+[0-9.]*)?(mm)" + _C_SPACE
+            + rb"+(f/|f|1/|1:)?([0-9.]+)(-[0-9.]+)?" + _ANY + rb"*"
+        ),
+        (1, 2, 5),
+    ),
+    (
+        re.compile(
+            _ANY + rb"*?1:([0-9.]+)[-]?([0-9.]+)?" + _C_SPACE
+            + rb"+([0-9.]+)[-]?([0-9.]+)?(mm)?" + _ANY + rb"*"
+        ),
+        (3, 4, 1),
+    ),
+    (
+        re.compile(
+            _ANY + rb"*?([0-9.]+)[-]?([0-9.]+)?" + _C_SPACE + rb"*/" + _C_SPACE
+            + rb"*([0-9.]+)[-]?([0-9.]+)?" + _ANY + rb"*"
+        ),
+        (3, 4, 1),
+    ),
+)  # fmt: skip
+
+
+def name_guess(model: str) -> tuple[float | None, float | None, float | None] | None:
+    """(min focal, max focal, min aperture) liblensfun reads from a lens's
+    model name, each None where the name gives none; None where it reads
+    nothing (no pattern fits, or the name says adapter, converter...)."""
+    if any(word in model for word in _NOT_GUESSED):
+        return None
+    return _name_numbers(model)
+
+
+def _name_numbers(model: str) -> tuple[float | None, float | None, float | None] | None:
+    """:func:`name_guess` without the names liblensfun leaves out."""
+    name = model.encode("utf-8", "surrogateescape")
+    if _EXTENDER.fullmatch(name) is not None:
+        return None
+    for pattern, groups in _NAME_PATTERNS:
+        found = pattern.fullmatch(name)
+        if found is not None:
+            texts = [found.group(group) for group in groups]
+            return tuple(  # type: ignore[return-value]
+                single(atof(text.decode("ascii"))) if text is not None else None for text in texts
+            )
+    return None
 
 
 def piece_refusal(piece: Any, line_of: Callable[[Any], int]) -> Refusal | None:
@@ -449,7 +562,7 @@ class _Walk:
         if definition is None or definition.kind not in owners:
             problem: str | None = _text_context(name, text)
         else:
-            problem = definition.text(name, text)
+            problem = definition.text(name, text, element.get("lang"))
         if problem is None:
             return None
         start = self.line_of(element) if after is None else self.end_line(after)
@@ -464,3 +577,242 @@ class _Walk:
             return self.line_of(element) + (element.text or "").count("\n")
         last = element[-1]
         return self.end_line(last) + (last.tail or "").count("\n")
+
+
+# ---------------------------------------------------------------------------
+# The screen: shapes liblensfun accepts whatever their values
+# ---------------------------------------------------------------------------
+
+#: More than any file has: every line of a file that passes the screen.
+EVERY_LINE = 1 << 62
+
+_S = rb"[ \t\r\n]"
+_VALUE = rb"""(?:"[^"<]*+"|'[^'<]*+')"""
+
+
+def _one_of(words: Sequence[str]) -> bytes:
+    return b"(?:" + b"|".join(re.escape(word).encode() for word in words) + b")"
+
+
+def _attributes(name: str) -> bytes:
+    """Any number of the attributes element ``name`` takes (those with a list
+    of values: one of them, as written), then white space."""
+    allowed = _ELEMENTS[name][1] if name != _ROOT else {"version": None}
+    branches = [
+        _one_of([a for a, values in allowed.items() if values is None])
+        + _S
+        + rb"*+="
+        + _S
+        + rb"*+"
+        + _VALUE
+    ]
+    for attribute, values in allowed.items():
+        if values is not None:
+            listed = _one_of(values)
+            branches.append(
+                re.escape(attribute).encode() + _S + rb"*+=" + _S + rb"*+"
+                + rb'(?:"' + listed + rb'"|\'' + listed + rb"')"
+            )  # fmt: skip
+    return rb"(?:" + _S + rb"++(?:" + b"|".join(branches) + rb"))*+" + _S + rb"*+"
+
+
+def _usual_entry(name: str, order: tuple[str, ...]) -> bytes:
+    """A calibration entry written the usual way (one space, double quotes, the
+    attributes in ``order``, each optional): a quicker path for the common case."""
+    allowed = _ELEMENTS[name][1]
+    parts = []
+    for attribute in order:
+        values = allowed[attribute]  # type: ignore[index]
+        value = rb'"' + _one_of(values) + rb'"' if values is not None else rb'"[^"<]*+"'
+        parts.append(b"(?: " + re.escape(attribute).encode() + b"=" + value + b"|)")
+    return b"<" + name.encode() + b"".join(parts) + rb" ?/>"
+
+
+def _empty(name: str) -> bytes:
+    return (
+        b"<"
+        + name.encode()
+        + _attributes(name)
+        + rb"(?:/>|>"
+        + _S
+        + rb"*+</"
+        + name.encode()
+        + _S
+        + rb"*+>)"
+    )
+
+
+def _text(name: str, text: bytes) -> bytes:
+    """An element of text ``text``; with ``lang=``, text that is not blank (else
+    liblensfun would apply its language to the next text)."""
+    tag = name.encode()
+    end = rb"</" + tag + _S + rb"*+>"
+    shape = b"<" + tag + _S + rb"*+(?:/>|>" + text + end + b")"
+    if _ELEMENTS[name][1] is _LANG:
+        shape += (
+            b"|<" + tag + _S + rb"++lang" + _S + rb"*+=" + _S + rb"*+" + _VALUE + _S + rb"*+>"
+            + _S + rb"*+[^<&\s]" + text + end
+        )  # fmt: skip
+    return shape
+
+
+_MISC = rb"(?:<!--(?:[^-]++|-(?!->))*+-->|<\?(?:[^?]++|\?(?!>))*+\?>)"
+_PLAIN = rb"[^<]*+"
+# A model's text, which liblensfun matches against its name patterns: no line
+# end, written or as a character reference ("." of a pattern takes none).
+_NAME = rb"[^<&\r\n]*+(?:&(?:amp|lt|gt|quot|apos);[^<&\r\n]*+)*+"
+# A crop factor liblensfun reads as positive, also in single precision.
+_POSITIVE = rb"[ \t\r\n]*+(?:[1-9][0-9]{0,9}(?:\.[0-9]*+)?|0?\.0{0,6}[1-9][0-9]*+)[ \t\r\n]*+"
+_TYPE = rb"[ \t\r\n]*+" + _one_of(sorted(LENS_TYPES)) + rb"[ \t\r\n]*+"
+# The attributes of calibration entries in the order Lensfun's files mostly
+# have them (any order is accepted, more slowly).
+_USUAL_ORDER = {
+    "vignetting": ("model", "focal", "aperture", "distance", "k1", "k2", "k3"),
+    "distortion": ("model", "focal", "real-focal", "a", "b", "c", "k1", "k2"),
+    "tca": ("model", "focal", "br", "cr", "vr", "bb", "cb", "vb", "kr", "kb"),
+}
+
+
+def _shapes() -> tuple[re.Pattern[bytes], re.Pattern[bytes]]:
+    """The screen's patterns: a document up to the first element of a shape
+    it does not vouch for, and the end of a document."""
+
+    def content(name: str, children: list[bytes], text: bytes = rb"[^<]++") -> bytes:
+        tag = name.encode()
+        inner = b"|".join([text, *children, _MISC])
+        return b"<" + tag + _S + rb"*+>(?:" + inner + rb")*+</" + tag + _S + rb"*+>"
+
+    entries = [_usual_entry(name, order) for name, order in _USUAL_ORDER.items()]
+    entries += [_empty(name) for name in sorted(_ENTRIES)]
+    calibration = (
+        rb"<calibration" + _attributes("calibration") + rb"(?:/>|>(?:[^<]++|"
+        + b"|".join([*entries, _MISC]) + rb")*+</calibration" + _S + rb"*+>)"
+    )  # fmt: skip
+    lens = content(
+        "lens",
+        [
+            calibration,
+            _text("model", _NAME),
+            _text("maker", _PLAIN),
+            _text("mount", _PLAIN),
+            _text("cropfactor", _POSITIVE),
+            _empty("focal"),
+            _empty("aperture"),
+            _text("aspect-ratio", _PLAIN),
+            _text("type", _TYPE),
+            _empty("center"),
+        ],
+    )
+    camera = content(
+        "camera",
+        [
+            _text("maker", _PLAIN),
+            _text("model", _PLAIN),
+            _text("variant", _PLAIN),
+            _text("mount", _PLAIN),
+            _text("cropfactor", _POSITIVE),
+        ],
+    )
+    mount = content("mount", [_text("name", _PLAIN), _text("compat", _PLAIN)], _S + b"++")
+    document = re.compile(
+        rb"(?:[^<]++|<!DOCTYPE[^\[>]*+>|" + _MISC + rb")*+<" + _ROOT.encode()
+        + _attributes(_ROOT) + rb">(?:[^<]++|" + b"|".join([lens, camera, mount, _MISC]) + rb")*+"
+    )  # fmt: skip
+    end = re.compile(rb"</" + _ROOT.encode() + _S + rb"*+>(?:" + _S + rb"++|" + _MISC + rb")*+")
+    return document, end
+
+
+_SHAPED, _END = _shapes()
+
+
+def shaped_until(data: bytes) -> int:
+    """The line before which every top-level element of a well-formed document
+    ``data`` (line ends normalized) has a shape liblensfun accepts whatever
+    its values (see the module's description): :data:`EVERY_LINE` for the
+    whole document, 0 for none of it."""
+    found = _SHAPED.match(data)
+    if found is None:
+        return 0
+    stop = found.end()
+    if _END.fullmatch(data, stop) is not None:
+        return EVERY_LINE
+    return data.count(b"\n", 0, stop) + 1
+
+
+def lens_accepted(model: str, mounts: Sequence[str], content: Sequence[tuple]) -> bool:
+    """Whether ``Check()`` accepts a lens of a shape :func:`shaped_until`
+    vouches for, judged on what the reader keeps of it: its model (the last
+    without ``lang=``), the texts of its mounts, and its other children as
+    (tag, sorted attributes, text). False where that does not tell."""
+    if not model or not any(mounts):
+        return False
+    focal = [0.0, 0.0]
+    aperture = [0.0, 0.0]
+    for tag, attributes, text in content:
+        if tag == "focal" or tag == "aperture":
+            pair = focal if tag == "focal" else aperture
+            if len(attributes) > 1 and any(name == "value" for name, _ in attributes):
+                return False  # their order counts, and is not kept
+            for name, value in attributes:
+                number = single(atof(value))
+                if name != "max":
+                    pair[0] = number
+                if name != "min":
+                    pair[1] = number
+        elif tag == "aspect-ratio" and not _aspect_ratio(text) >= 1:
+            return False
+    if aperture[0] and focal[0]:  # nothing is guessed
+        return (not focal[1] or focal[0] <= focal[1]) and (
+            not aperture[1] or aperture[0] <= aperture[1]
+        )
+    # Guessed from the name and calibrations: a range not given at all comes
+    # out in order, but for a name whose focal lengths are out of order.
+    if focal[0] or focal[1]:
+        if not (focal[0] and focal[1] and focal[0] <= focal[1]):
+            return False
+    elif "-" in model and _maybe_decreasing(model):
+        named = _name_numbers(model)
+        if named is not None and named[1] is not None and not named[0] <= named[1]:  # type: ignore[operator]
+            return False
+    if aperture[0] or aperture[1]:
+        return bool(aperture[0] and aperture[1] and aperture[0] <= aperture[1])
+    return True
+
+
+# A range in a name: the numbers before and after a "-".
+_RANGE = re.compile(r"(?<![0-9.])([0-9.]+)-(?=([0-9.]+))", re.ASCII)
+
+
+def _maybe_decreasing(model: str) -> bool:
+    """Whether the focal lengths liblensfun reads from a model's name may be out
+    of order: its patterns read a maximum only after a "-", as the whole run
+    of digits and dots there, the minimum as the whole run before it (or
+    that run from its first digit). False only where no range is."""
+    for before, after in _RANGE.findall(model):
+        try:
+            low = max(float(before), float(before.lstrip(".")))
+            high = float(after)
+        except ValueError:
+            return True
+        if not low <= high:
+            return True
+    return False
+
+
+def camera_accepted(maker: str, model: str, mounts: Sequence[str], crop_text: str | None) -> bool:
+    """Whether ``Check()`` accepts a camera of a shape :func:`shaped_until`
+    vouches for (whose crop factors are positive): it has a maker, model,
+    mount and crop factor. False where that does not tell."""
+    return bool(maker and model and any(mounts) and crop_text)
+
+
+def mount_accepted(names: Sequence[str]) -> bool:
+    """Whether ``Check()`` accepts a top-level mount whose names without
+    ``lang=`` are ``names``: it has one. False where that does not tell."""
+    return any(names)
+
+
+def _aspect_ratio(text: str) -> float:
+    """An ``<aspect-ratio>`` as liblensfun reads it ("4:3" or a number)."""
+    numerator, colon, denominator = text.partition(":")
+    return single(_ratio(atof(numerator), atof(denominator)) if colon else atof(text))

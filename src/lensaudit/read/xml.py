@@ -146,6 +146,7 @@ def parse(
         if known is not None:
             return _checked_root(*known, lines)
     visiting = visitor()
+    _show_document(data, visiting)
     try:
         # Read as one tree: names in namespaces, a root that is an element read,
         # and a document type with declarations of its own, which is dropped before
@@ -175,6 +176,14 @@ def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed,
         line = lines.first if lines is not None else root.sourceline or 1
         return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
     return Parsed(), visiting
+
+
+def _show_document(data: bytes, visiting: Any) -> None:
+    """Hand the bytes of a document about to be read to a visitor that looks
+    at them first (``document(data)``)."""
+    look = getattr(visiting, "document", None)
+    if look is not None:
+        look(data)
 
 
 def _judge_root(root: Any, visiting: Any, lines: _Lines | None) -> None:
@@ -258,8 +267,10 @@ class Pieces:
         parts.append(data[position:])
         visiting = visitor()
         placing = _Placing(visiting, placed)
+        document = b"".join(parts)
+        _show_document(document, visiting)
         try:
-            root = _stream(b"".join(parts), placing, None)
+            root = _stream(document, placing, None)
         except etree.XMLSyntaxError:
             return None
         return (root, visiting) if placing.complete() else None
@@ -317,6 +328,12 @@ def _lens_spans(data: bytes) -> Iterator[tuple[int, int]]:
 
 
 _ENCODING = re.compile(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([^\"']*)[\"']")
+
+
+def declares_other_encoding(data: bytes) -> bool:
+    """Whether a document's XML declaration names an encoding other than UTF-8."""
+    declared = _ENCODING.match(data)
+    return declared is not None and declared.group(1).lower() not in (b"utf-8", b"utf8")
 
 
 def _relative_line(element: Any) -> int:
