@@ -15,6 +15,7 @@ import mpmath
 import numpy as np
 import pytest
 
+import liblensfun_load
 from conftest import lens_xml
 from lensaudit import check as checking
 from lensaudit.check import CheckError, check
@@ -170,8 +171,12 @@ CALIBRATIONS = """\
 
 def test_a_calibration_is_one_lens_with_one_crop_factor_and_aspect_ratio(write_xml):
     # The second <calibration> has its own crop factor: another calibration.
-    # The third has the lens's: the same calibration as the first.
-    assert codes(check(write_xml(CALIBRATIONS))) == [("error", "duplicate-focal", 11)]
+    # The third has the lens's: the same calibration as the first. (The lens
+    # has no <mount>, so liblensfun refuses it at its end tag, line 14.)
+    assert codes(check(write_xml(CALIBRATIONS))) == [
+        ("error", "duplicate-focal", 11),
+        ("error", "liblensfun-refuses", 14),
+    ]
 
 
 def lens(maker: str, model: str, crop: str, mount: str = "Mount A") -> str:
@@ -427,7 +432,20 @@ def test_bundled_database_counts_every_entry_and_has_no_input_errors(bundled_db)
         for _ in StdlibET.parse(file).getroot().iter("distortion")
     )
     assert result.entries == expected
+    # The one input error: the files liblensfun master refuses (for
+    # <real-focal-length>, which the bundled database still has), each at the
+    # line liblensfun itself names.
+    refused = set()
+    for file in sorted(bundled_db.glob("*.xml")):
+        loaded, _ = liblensfun_load.load_and_lenses(file.read_bytes())
+        if not loaded.ok:
+            refused.add((file.name, liblensfun_load.stop_line(loaded)))
+    assert len(refused) == 8
+    assert {
+        (Path(f.file).name, f.line) for f in result.findings if f.code == "liblensfun-refuses"
+    } == refused
     assert {f.code for f in result.findings} <= {
+        "liblensfun-refuses",
         "fold-in-image",
         "fold-near-image",
         "duplicate-focal",

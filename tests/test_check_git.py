@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+import liblensfun_load
 from conftest import GIT_ENVIRONMENT
 from lensaudit.check import CheckError, check
 from lensaudit.cli import main
@@ -262,12 +263,21 @@ def repaired(repository) -> tuple[Repository, str, list[int]]:
     return repository, with_fold, fold_lines
 
 
+def refused_line(path: Path) -> int:
+    """Where liblensfun master stops loading the file (the bundled database's
+    actioncams.xml has a <real-focal-length>, which master no longer reads)."""
+    loaded, _ = liblensfun_load.load_and_lenses(path.read_bytes())
+    assert not loaded.ok
+    return liblensfun_load.stop_line(loaded)
+
+
 def test_repairing_a_broken_file_keeps_its_old_findings_known(repaired):
     repository, with_fold, [fold_line] = repaired
     result = check(repository.db, baseline="HEAD")
     assert not result.failed
     assert [(f.code, f.line, f.known) for f in result.findings if f.severity == "error"] == [
-        ("fold-in-image", fold_line, True)
+        ("fold-in-image", fold_line, True),
+        ("liblensfun-refuses", refused_line(repository.db / CHANGED_FILE), True),
     ]
 
 
@@ -294,7 +304,8 @@ def test_without_a_readable_version_the_findings_of_the_file_are_not_new(repaire
     result = check(repository.db, baseline="HEAD")
     assert not result.failed
     assert [(f.code, f.line, f.known) for f in result.findings if f.severity == "error"] == [
-        ("fold-in-image", fold_line, True)
+        ("fold-in-image", fold_line, True),
+        ("liblensfun-refuses", refused_line(repository.db / CHANGED_FILE), True),
     ]
     [notice] = [f for f in result.findings if f.severity == "notice"]
     assert "not counted as new" in notice.message

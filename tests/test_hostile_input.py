@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+import liblensfun_load
 from conftest import lens_xml
 from lensaudit.check import MESSAGE_LIMIT, check
 from lensaudit.cli import main
@@ -221,8 +222,17 @@ def test_non_utf8_file_names_the_byte_and_the_encoding_expected(write_xml):
 
 
 def test_utf16_file_with_a_byte_order_mark_is_read(write_xml):
-    result = check(write_xml(lens_xml(FOLDING).encode("utf-16")))
-    assert [f.code for f in result.findings] == ["fold-in-image"]
+    text = lens_xml(FOLDING)
+    fold_line = next(n for n, line in enumerate(text.splitlines(), 1) if FOLDING in line)
+    data = text.encode("utf-16")
+    result = check(write_xml(data))
+    # liblensfun reads UTF-8 only: it refuses the file from its first byte.
+    loaded, _ = liblensfun_load.load_and_lenses(data)
+    assert not loaded.ok
+    assert [(f.code, f.line) for f in result.findings] == [
+        ("liblensfun-refuses", liblensfun_load.stop_line(loaded)),
+        ("fold-in-image", fold_line),
+    ]
 
 
 def test_binary_garbage_is_an_xml_error(write_xml):

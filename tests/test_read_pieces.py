@@ -18,7 +18,9 @@ from lensaudit.read.records import FileTables
 
 
 def tables_text(tables: FileTables) -> str:
-    """Everything read of a file, as text (NaN equal to NaN, 0.0 apart from -0.0)."""
+    """Everything read of a file, as text (NaN equal to NaN, 0.0 apart from -0.0),
+    where liblensfun stops reading it included."""
+    assert "refusal" in FileTables.STORED
     values = [getattr(tables, name) for name in FileTables.STORED]
     values += [tables.vignetting, tables.tca, tables.lens_of_vignetting, tables.lens_of_tca]
     return repr(values)
@@ -107,6 +109,11 @@ MISLEADING = {
     "end tag with space": document(LENS.replace("</lens>", "</lens  >"), OTHER),
     "empty lens": document("<lens/>\n<lens >\n</lens>\n", LENS),
     "tab in start tag": document(LENS.replace("<lens>", "<lens\t>"), OTHER),
+    "refused lens": document(OTHER, LENS.replace("<maker>", "<foo/><maker>", 1)),
+    "lens refused after": document(LENS, OTHER.replace("<mount>", "<mount lang='x'>", 1)),
+    "refused version": document(LENS, OTHER).replace(b'version="2"', b'version="3"'),
+    "refused root": b"<maker>\n" + (LENS + OTHER).encode() + b"</maker>\n",
+    "byte-order mark": b"\xef\xbb\xbf" + document(LENS, OTHER),
 }
 
 

@@ -19,7 +19,10 @@ sentence. Errors make the check fail; warnings and notices do not.
   are counted but not checked further), ``not-a-database`` (well-formed, but
   its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
   ``bad-value`` (not a finite number, focal or crop factor <= 0),
-  ``unknown-model``, ``no-lens``, ``r-max-not-computable``.
+  ``unknown-model``, ``no-lens``, ``r-max-not-computable``,
+  ``liblensfun-refuses`` (Lensfun master's liblensfun stops loading the file
+  there and loses the lenses after it; see :mod:`lensaudit.check.loading`;
+  not repeated for a file that is ``xml-error`` at that spot).
 - Vignetting and TCA (see :mod:`lensaudit.vignetting` and :mod:`lensaudit.tca`):
   ``vignetting-zero-in-image`` (error) when the correction's C(r) reaches 0
   inside the image, ``vignetting-low-in-image`` (warning) when it falls below
@@ -111,6 +114,7 @@ from .result import (
     FOLD_NEAR_IMAGE,
     FOLD_OUTSIDE_IMAGE,
     INVERSION_FAILS_IN_IMAGE,
+    LIBLENSFUN_REFUSES,
     MESSAGE_LIMIT,
     MISSING_ATTRIBUTE,
     NAME_LIMIT,
@@ -154,6 +158,7 @@ __all__ = [
     "FOLD_OUTSIDE_IMAGE",
     "HISTORY_DEPTH",
     "INVERSION_FAILS_IN_IMAGE",
+    "LIBLENSFUN_REFUSES",
     "MESSAGE_LIMIT",
     "MISSING_ATTRIBUTE",
     "NAME_LIMIT",

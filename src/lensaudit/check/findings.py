@@ -34,6 +34,7 @@ from .between import folds_between
 from .duplicates import Known, duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .inversion import inversion_findings
+from .loading import liblensfun_refusals
 from .matching import calibration_content, entry_content, file_identified, lens_identity
 from .metadata import conflicting_calibrations, starting_values, undefined_mounts
 from .parsing import ParsedSource, parse_sources
@@ -114,6 +115,9 @@ def analyse_parsed(
         add(index, item)
     for index, item in undefined_mounts(read):
         add(index, item)
+    for index, file in enumerate(read):
+        for item in liblensfun_refusals(file):
+            add(index, item)
     ordered.sort(key=lambda pair: pair[0])
     return files, [item for _, item in ordered]
 

@@ -95,6 +95,8 @@ def check(
       no-lens, duplicate-lens, duplicate-focal, unreadable,
       r-max-not-computable (the input errors also for <vignetting>
       and <tca> elements, which their messages name)
+      liblensfun-refuses   liblensfun master stops loading the file
+                           there and loses the lenses after it
       vignetting-zero-in-image  C(r) <= 0 inside the image: the
                            correction divides by zero or flips sign
       tca-fold-in-image    a colour channel folds inside the image

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
-from . import parallel, paths, xml
+from . import liblensfun, parallel, paths, xml
 from .cache import Cache, content_digest
 from .paths import DatabaseSource, Paths, display_path, expand, resolve
 from .records import (
@@ -238,10 +238,28 @@ def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None
             lens_of_tca = [None, *lens_of_tca]  # type: ignore[misc]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
               found.lenses, distortion, lens_of_row, omitted, found.cameras,
-              found.mount_names)  # fmt: skip
+              found.mount_names, _refusal(data, parsed, found))  # fmt: skip
     if not calibrations:
         return stored, None
     return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)
+
+
+def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, str, int] | None:
+    """Where liblensfun stops reading a file, why, and how many lenses it holds
+    then (see :attr:`FileTables.refusal`)."""
+    # libxml2 has read a well-formed document as UTF-8 unless it declares another encoding.
+    utf8_checked = parsed.status == STATUS_OK and not xml.declares_other_encoding(data)
+    leading = liblensfun.leading_refusal(data, utf8_checked)
+    refusal = (*leading, 0) if leading is not None else found.first_refusal()
+    if parsed.status == xml.STATUS_XML_ERROR and (refusal is None or refusal[0] >= parsed.line):
+        # What comes first is the markup itself (GMarkup refuses it too).
+        # The lenses ended before the error's position, which liblensfun holds.
+        offset = 0
+        for _ in range(parsed.line - 1):
+            offset = data.find(b"\n", offset) + 1
+        kept = data.count(b"</lens>", 0, offset + max(parsed.column - 1, 0)) if offset >= 0 else 0
+        return parsed.line, f"{liblensfun.NOT_WELL_FORMED}: {parsed.problem}", kept
+    return refusal
 
 
 def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
@@ -255,7 +273,7 @@ def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
 def unreadable(name: str, path: Path | None, message: str) -> FileTables:
     """The tables of a file that could not be read: one row that says why."""
     values = (STATUS_UNREADABLE, 0, 0, message, message, [],
-              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [])  # fmt: skip
+              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [], None)  # fmt: skip
     tables = FileTables(name, path, b"", values)
     tables.set_calibrations(
         (

@@ -43,7 +43,7 @@ except ImportError:  # pragma: no cover - every CPython has _blake2
 #: Records kept at most, and their total size at most (least recently used go first).
 MAX_RECORDS = 20_000
 MAX_BYTES = 1 << 30
-_MAGIC = b"lensaudit record 1\n"
+_MAGIC = b"lensaudit record 3\n"
 _DIGEST_SIZE = 16
 _SUFFIX = ".rec"
 _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer

@@ -156,6 +156,12 @@ class FileTables:
     ``omitted`` the coefficient attributes each distortion row's element
     leaves out. ``cameras`` are :class:`Camera` records; ``mount_names`` the
     (line, name) of each untranslated ``<name>`` of a top-level ``<mount>``.
+    ``refusal`` is (line, reason, lenses kept) of where liblensfun stops
+    loading the file (:mod:`lensaudit.read.liblensfun`), with the number of
+    ``lenses`` before that point, which liblensfun holds; None where it loads
+    the file. For a file that is not well-formed, the line is libxml2's and
+    the reason starts with "not well-formed XML", unless liblensfun stops
+    earlier.
     ``vignetting`` and ``tca`` are their rows (see
     :mod:`lensaudit.read.tables`), None until read; ``lens_of_vignetting`` and
     ``lens_of_tca`` the lens index of each.
@@ -167,13 +173,14 @@ class FileTables:
     __slots__ = (
         "name", "path", "digest", "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
-        "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
+        "refusal", "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
     )  # fmt: skip
 
     #: The fields that the cache keeps, in order (all but name, path and digest).
     STORED = (
         "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
+        "refusal",
     )  # fmt: skip
 
     def __init__(self, name: str, path: object, digest: bytes, values: tuple) -> None:
@@ -183,7 +190,11 @@ class FileTables:
         (
             self.status, self.line, self.column, self.error, self.problem,
             lenses, self.distortion, self.lens_of_row, self.omitted, cameras, self.mount_names,
+            refusal,
         ) = values  # fmt: skip
+        self.refusal: tuple[int, str, int] | None = (
+            tuple(refusal) if refusal is not None else None  # type: ignore[assignment]
+        )
         self.lenses = [Lens(*lens) for lens in lenses]
         self.cameras = [Camera(*camera) for camera in cameras]
         self.vignetting: list[tuple] | None = None

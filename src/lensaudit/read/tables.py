@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from operator import itemgetter
 
+from . import liblensfun
 from .records import (
     DEFAULT_ASPECT_RATIO,
     DEFAULT_CROP_FACTOR,
@@ -542,15 +543,58 @@ class FileReader:
         self.lens_of_tca: list[int | None] | None = [] if calibrations else None
         self.cameras: list[tuple] = []
         self.mount_names: list[tuple[int, str]] = []
+        #: Where liblensfun stops reading the pieces so far, why, and how many of
+        #: the lenses before it holds: (line, reason, lenses kept), or None.
+        self.refusal: tuple[int, str, int] | None = None
+        self._root_refusal: tuple[int, str, int] | None = None
+        # The pieces on lines before this are of shapes liblensfun accepts
+        # whatever their values (see :meth:`document`).
+        self._shaped_until = 0
+
+    #: Whether pieces are screened before they are walked (off: every piece is walked).
+    screen = True
+
+    def document(self, data: bytes) -> None:
+        """Look at the bytes of the document (well-formed, line ends normalized)
+        whose pieces come next, for what liblensfun surely accepts."""
+        if self.screen:
+            self._shaped_until = liblensfun.shaped_until(data)
+
+    def root(self, element: etree._Element, line: int) -> None:
+        """Judge the document's root element, whose start tag ends on ``line``
+        (liblensfun reads it before any piece)."""
+        found = liblensfun.root_refusal(element, line)
+        self._root_refusal = (*found, 0) if found is not None else None
+
+    def first_refusal(self) -> tuple[int, str, int] | None:
+        """Where liblensfun stops reading the document, why, and the number of
+        lenses it holds then; None if it reads every piece (see
+        :mod:`lensaudit.read.liblensfun`)."""
+        return self._root_refusal or self.refusal
 
     def add(self, piece: etree._Element, line_of: LineOf) -> None:
         """Read one piece of the document."""
-        if piece.tag == "camera":
-            self.cameras.append(read_camera(piece, line_of))
-        elif piece.tag == "mount":
-            self.mount_names += mount_names(piece, line_of)
-        lenses, found = elements_in_context(piece, self.tags, len(self.lenses), line_of)
+        first_lens = len(self.lenses)
+        accepted = False
+        tag = piece.tag
+        if tag == "camera":
+            camera = read_camera(piece, line_of)
+            self.cameras.append(camera)
+            accepted = liblensfun.camera_accepted(*camera[1:4], camera[5])
+        elif tag == "mount":
+            names = mount_names(piece, line_of)
+            self.mount_names += names
+            accepted = liblensfun.mount_accepted([name for _, name in names])
+        lenses, found = elements_in_context(piece, self.tags, first_lens, line_of)
         self.lenses += lenses
+        if self.refusal is None:
+            if tag == "lens":  # its own row comes first
+                row = lenses[0]
+                accepted = liblensfun.lens_accepted(row[2], row[3], row[_LENS_CONTENT])
+            if not accepted or line_of(piece) >= self._shaped_until:
+                refusal = liblensfun.piece_refusal(piece, line_of)
+                if refusal is not None:  # liblensfun holds the lenses of the pieces before
+                    self.refusal = (*refusal, first_lens)
         rows = {VIGNETTING: self.vignetting, TCA: self.tca}
         lens_of = {VIGNETTING: self.lens_of_vignetting, TCA: self.lens_of_tca}
         for element, context in found:
@@ -573,10 +617,12 @@ class FileReader:
 
     def taken(self) -> tuple | None:
         """The tables read so far, for :meth:`extend` into another reader; None
-        if a row is not ``ok`` (its message may name a line)."""
+        if a row is not ``ok`` (its message may name a line) or liblensfun
+        refuses what was read."""
         tables = self._tables()
         if (
-            any(row[_LENS_PROBLEM] for row in self.lenses)
+            self.refusal is not None
+            or any(row[_LENS_PROBLEM] for row in self.lenses)
             or any(row[-2] != STATUS_OK for rows in tables[1:4] if rows for row in rows)
             or any(None in lens_of for lens_of in tables[4:7] if lens_of)
         ):
@@ -597,8 +643,10 @@ class FileReader:
         self.omitted += taken[7]
 
 
-#: Where a lens row (see :func:`read_lens`) says why its entries cannot be audited.
+#: Where a lens row (see :func:`read_lens`) says why its entries cannot be audited,
+#: and where it holds its other children.
 _LENS_PROBLEM = 8
+_LENS_CONTENT = 9
 
 
 #: The elements a :class:`FileReader` reads (what a root may be to be read whole).

@@ -146,6 +146,7 @@ def parse(
         if known is not None:
             return _checked_root(*known, lines)
     visiting = visitor()
+    _show_document(data, visiting)
     try:
         # Read as one tree: names in namespaces, a root that is an element read,
         # and a document type with declarations of its own, which is dropped before
@@ -166,6 +167,7 @@ def parse(
 
 def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed, V]:
     """What a well-formed document whose root is ``root`` is: a database or not."""
+    _judge_root(root, visiting, lines)
     if root.tag != DATABASE_ROOT:
         tag = root.tag if isinstance(root.tag, str) else "?"
         if len(tag) > 40:
@@ -174,6 +176,21 @@ def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed,
         line = lines.first if lines is not None else root.sourceline or 1
         return Parsed(STATUS_NOT_DATABASE, line, 0, problem), visiting
     return Parsed(), visiting
+
+
+def _show_document(data: bytes, visiting: Any) -> None:
+    """Hand the bytes of a document about to be read to a visitor that looks
+    at them first (``document(data)``)."""
+    look = getattr(visiting, "document", None)
+    if look is not None:
+        look(data)
+
+
+def _judge_root(root: Any, visiting: Any, lines: _Lines | None) -> None:
+    """Hand the root element to a visitor that judges it (``root(element, line)``)."""
+    judge = getattr(visiting, "root", None)
+    if judge is not None:
+        judge(root, lines.first if lines is not None else root.sourceline or 1)
 
 
 class Pieces:
@@ -221,7 +238,7 @@ class Pieces:
             and b"xmlns" not in data
             and _PLACE not in data
             and not _declares(data)
-            and _root_name(data) not in read
+            and _root_name(data) == DATABASE_ROOT
         )
 
     def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
@@ -250,8 +267,10 @@ class Pieces:
         parts.append(data[position:])
         visiting = visitor()
         placing = _Placing(visiting, placed)
+        document = b"".join(parts)
+        _show_document(document, visiting)
         try:
-            root = _stream(b"".join(parts), placing, None)
+            root = _stream(document, placing, None)
         except etree.XMLSyntaxError:
             return None
         return (root, visiting) if placing.complete() else None
@@ -263,7 +282,8 @@ class Pieces:
 
         found = _UNUSABLE
         try:
-            root = etree.fromstring(b"<r>" + piece + b"</r>", parser())
+            # In a root like the document's: liblensfun judges a lens by its parent.
+            root = etree.fromstring(b"<lensdatabase>" + piece + b"</lensdatabase>", parser())
         except etree.XMLSyntaxError:
             root = None
         # The bytes start with "<lens" and end with ">": one child, one element.
@@ -308,6 +328,12 @@ def _lens_spans(data: bytes) -> Iterator[tuple[int, int]]:
 
 
 _ENCODING = re.compile(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([^\"']*)[\"']")
+
+
+def declares_other_encoding(data: bytes) -> bool:
+    """Whether a document's XML declaration names an encoding other than UTF-8."""
+    declared = _ENCODING.match(data)
+    return declared is not None and declared.group(1).lower() not in (b"utf-8", b"utf8")
 
 
 def _relative_line(element: Any) -> int:
@@ -427,6 +453,7 @@ def _recovered(
         root.getroottree().docinfo.clear()
         if b"xmlns" in data:
             _use_local_names(root)
+        _judge_root(root, visiting, None)
         _visit_tree(root, visiting, read, _line_getter(None, root))
     return Parsed(STATUS_XML_ERROR, line, column, problem), visiting
 
