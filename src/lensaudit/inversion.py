@@ -208,19 +208,27 @@ def newton_outcome(model: LiblensfunModel, rows: ArrayLike, rd: ArrayLike) -> ND
 
 
 def _residual_and_slope(r, target, ptlens, poly3, t0, t1, t2, q, a4, b3, c2, k3, k5):
-    """liblensfun's residual and its derivative at r, each model in its own order."""
-    r2 = r * r
+    """liblensfun's residual and its derivative at r, each model in its own
+    order (each sample computed by its own model's formula only)."""
+    residual, slope = np.empty_like(r), np.empty_like(r)
+    poly5 = ~(ptlens | poly3)
     # ptlens: ru * (a ru ru ru + b ru ru + c ru + 1) - rd, slope 4a ru^3 + 3b ru^2 + 2c ru + 1
-    f_pt = r * (t0 * r * r * r + t1 * r * r + t2 * r + 1) - target
-    s_pt = a4 * r * r * r + b3 * r * r + c2 * r + 1
+    if ptlens.any():
+        x = r[ptlens]
+        a, b, c = t0[ptlens], t1[ptlens], t2[ptlens]
+        residual[ptlens] = x * (a * x * x * x + b * x * x + c * x + 1) - target[ptlens]
+        slope[ptlens] = a4[ptlens] * x * x * x + b3[ptlens] * x * x + c2[ptlens] * x + 1
     # poly3: ru ru ru + ru q - rd q, slope 3 ru ru + q
-    f_p3 = r * r * r + r * q - target
-    s_p3 = 3 * r * r + q
+    if poly3.any():
+        x, k = r[poly3], q[poly3]
+        residual[poly3] = x * x * x + x * k - target[poly3]
+        slope[poly3] = 3 * x * x + k
     # poly5: ru (1 + k1 ru2 + k2 ru2 ru2) - rd, slope 1 + 3 k1 ru2 + 5 k2 ru2 ru2
-    f_p5 = r * (1.0 + t0 * r2 + t1 * r2 * r2) - target
-    s_p5 = 1.0 + k3 * r2 + k5 * r2 * r2
-    residual = np.where(ptlens, f_pt, np.where(poly3, f_p3, f_p5))
-    slope = np.where(ptlens, s_pt, np.where(poly3, s_p3, s_p5))
+    if poly5.any():
+        x = r[poly5]
+        x2 = x * x
+        residual[poly5] = x * (1.0 + t0[poly5] * x2 + t1[poly5] * x2 * x2) - target[poly5]
+        slope[poly5] = 1.0 + k3[poly5] * x2 + k5[poly5] * x2 * x2
     return residual, slope
 
 
