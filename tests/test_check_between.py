@@ -25,21 +25,10 @@ from lensaudit.metrics import compute
 from lensaudit.pipeline import run
 from lensaudit.read.records import MODEL_COEFFICIENTS
 from liblensfun_master import interpolate_distortion, lenses, library
+from test_zooms_between import ADJACENT, OVERSHOOT
 
 CORNER = math.hypot(1.5, 1)
 
-#: Both clear the image corner by 11-13%; the 20 mm calibration bends the spline.
-OVERSHOOT = [
-    (10.0, (-0.0216, 0.0348, -0.0408)),
-    (11.0, (-0.0238, 0.0404, -0.0404)),
-    (20.0, (0.3135, 0.0292, -0.8963)),
-]
-#: Both neighbouring calibrations fold.
-ADJACENT = [
-    (10.0, (-0.026, -0.002, 0.005)),
-    (11.0, (-0.024, -0.002, 0.005)),
-    (20.0, (0.02, -0.01, 0.01)),
-]
 #: Far from folding anywhere.
 GENTLE = [
     (10.0, (0.0, -0.01, 0.0)),

@@ -209,23 +209,30 @@ MUTATIONS = {
     "aspect ratio 3:4": _insert_after(b"</model>", b"<aspect-ratio>3:4</aspect-ratio>"),
 }
 
+
+def mutated_real_files(test):
+    """A hypothesis test over up to three mutations of one of the real files,
+    400 examples a run."""
+    cases = given(
+        st.integers(0, 7),
+        st.lists(
+            st.tuples(st.sampled_from(sorted(MUTATIONS)), st.integers(0, 1000)),
+            min_size=1,
+            max_size=3,
+        ),
+    )
+    return settings(
+        max_examples=400,
+        deadline=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )(cases(test))
+
+
 #: Markup known to be read differently by GMarkup and lxml (see above).
 NOT_COMPARED = (b"<![CDATA[", b"&#10;", b"&#xA;", b"&#xa;")
 
 
-@settings(
-    max_examples=400,
-    deadline=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
-@given(
-    st.integers(0, 7),
-    st.lists(
-        st.tuples(st.sampled_from(sorted(MUTATIONS)), st.integers(0, 1000)),
-        min_size=1,
-        max_size=3,
-    ),
-)
+@mutated_real_files
 def test_mutated_real_files_are_refused_where_liblensfun_refuses_them(file_index, mutations):
     liblensfun_master.library()
     data = mutated(file_index, mutations)
@@ -247,19 +254,7 @@ def walked_verdict(data: bytes) -> tuple | None:
         return read.read_bytes(data, "test.xml").refusal
 
 
-@settings(
-    max_examples=400,
-    deadline=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
-@given(
-    st.integers(0, 7),
-    st.lists(
-        st.tuples(st.sampled_from(sorted(MUTATIONS)), st.integers(0, 1000)),
-        min_size=1,
-        max_size=3,
-    ),
-)
+@mutated_real_files
 def test_screen_never_vouches_for_what_the_walk_refuses(file_index, mutations):
     data = mutated(file_index, mutations)
     assert read.read_bytes(data, "test.xml").refusal == walked_verdict(data)
