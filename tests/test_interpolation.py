@@ -5,11 +5,13 @@ both, unsorted and repeated focal lengths, and outside the calibrated range."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lensaudit.interpolation import interpolated, weights
+from lensaudit.interpolation import interpolated, spline_terms, weights
 from liblensfun_master import interpolate_distortion, lenses, library
 
 NAMES = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "poly5": ("k1", "k2")}
@@ -91,3 +93,44 @@ def test_repeated_focal_lengths_are_taken_in_liblensfuns_order():
     ]
     for focal in (12.0, 17.5, 25.0):
         compare("ptlens", calibrations, focal)
+
+
+def liblensfun_slots(focals: list[float], focal: float) -> list[int | None]:
+    """lfLens::InterpolateDistortion's four slots, its loop transcribed: two
+    calibrations above the focal length (slot 1 the nearest), two below
+    (slot 2 the nearest), by strict comparison in the order met."""
+    slots: list[int | None] = [None] * 4
+    distances = [-math.inf, -math.inf, math.inf, math.inf]
+    for index, calibrated in enumerate(focals):
+        distance = focal - calibrated
+        if distance < 0:
+            if distance > distances[1]:
+                slots[0], distances[0] = slots[1], distances[1]
+                slots[1], distances[1] = index, distance
+            elif distance > distances[0]:
+                slots[0], distances[0] = index, distance
+        elif distance > 0:
+            if distance < distances[2]:
+                slots[3], distances[3] = slots[2], distances[2]
+                slots[2], distances[2] = index, distance
+            elif distance < distances[3]:
+                slots[3], distances[3] = index, distance
+    return slots
+
+
+@settings(max_examples=500, deadline=None)
+@given(
+    st.lists(st.sampled_from([8.0, 10.0, 12.0, 18.0, 24.0, 35.0, 55.0]), min_size=2, max_size=9),
+    st.floats(6.0, 60.0),
+)
+def test_the_spline_takes_the_calibrations_liblensfuns_loop_takes(focals, focal):
+    """Repeated focal lengths included: the first met is the nearest, the
+    second fills the outer slot, as liblensfun's strict comparisons have it."""
+    start, end, terms = spline_terms(focals, focal)
+    slots = liblensfun_slots(focals, focal)
+    if focal in focals or None in (slots[1], slots[2]):
+        return  # one calibration applies, checked by the tests above
+    assert (start, end) == (slots[1], slots[2])
+    used = {index for index, _ in terms}
+    expected = {slots[1], slots[2]} | {s for s in (slots[0], slots[3]) if s is not None}
+    assert used == expected

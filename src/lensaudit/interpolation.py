@@ -24,6 +24,8 @@ precision; these weights are its formulas in double precision.
 
 from __future__ import annotations
 
+import bisect
+import functools
 import math
 from collections.abc import Sequence
 
@@ -41,53 +43,73 @@ def spline_terms(
     its coefficients of 1, t, t^2, t^3. At a calibrated focal length, or
     outside the calibrated range, one calibration with g = 1 (and focal /
     focal_index folded into it: the weight is exactly 1)."""
-    # liblensfun's four spline slots: two calibrations above the focal length
-    # (slot 1 the nearest), two below (slot 2 the nearest), by f - calibrated.
+    # liblensfun's four spline slots (lfLens::InterpolateDistortion): the two
+    # calibrations nearest above the focal length (slot 1 the nearest), the
+    # two nearest below (slot 2 the nearest); among calibrations at the same
+    # focal length, the first met wins, and the second fills the outer slot.
+    if not math.isfinite(focal):
+        return None, None, []  # liblensfun's distances are never less than an infinite one
+    distinct, first, second = _calibrated(tuple(focals))
+    position = bisect.bisect_left(distinct, focal)
+    if position < len(distinct) and distinct[position] == focal:
+        index = first[position]
+        return None, None, [(index, (focal / focals[index], 0.0, 0.0, 0.0))]
     slots: list[int | None] = [None] * 4
-    distances = [-math.inf, -math.inf, math.inf, math.inf]
-    for index, calibrated in enumerate(focals):
-        distance = focal - calibrated
-        if distance == 0:
-            return None, None, [(index, (focal / calibrated, 0.0, 0.0, 0.0))]
-        if distance < 0:
-            if distance > distances[1]:
-                slots[0], distances[0] = slots[1], distances[1]
-                slots[1], distances[1] = index, distance
-            elif distance > distances[0]:
-                slots[0], distances[0] = index, distance
-        elif distance < distances[2]:
-            slots[3], distances[3] = slots[2], distances[2]
-            slots[2], distances[2] = index, distance
-        elif distance < distances[3]:
-            slots[3], distances[3] = index, distance
+    if position < len(distinct):  # the calibrations above
+        slots[1] = first[position]
+        slots[0] = second[position] if second[position] is not None else (
+            first[position + 1] if position + 1 < len(distinct) else None
+        )  # fmt: skip
+    if position > 0:  # the calibrations below
+        slots[2] = first[position - 1]
+        slots[3] = second[position - 1] if second[position - 1] is not None else (
+            first[position - 2] if position > 1 else None
+        )  # fmt: skip
     start, end = slots[1], slots[2]
     if start is None or end is None:
         side = start if start is not None else end
         return None, None, [] if side is None else [(side, (focal / focals[side], 0.0, 0.0, 0.0))]
-    found: dict[int, list[float]] = {}
-
-    def add(index: int, basis: tuple[int, ...], scale: float) -> None:
-        total = found.setdefault(index, [0.0] * 4)
-        for power, value in enumerate(basis):
-            total[power] += scale * value
-
     # The spline runs from the calibration above (t = 0) to the one below (t = 1).
-    add(start, _H00, 1.0)
-    add(end, _H01, 1.0)
+    parts = [(start, _H00, 1.0), (end, _H01, 1.0)]
     for slot, basis in ((0, _H10), (3, _H11)):
         # Tangents: half the difference of the neighbours either side, or
         # the difference of the two ends where a neighbour is missing.
         outer = slots[slot]
         if outer is None:
-            add(end, basis, 1.0)
-            add(start, basis, -1.0)
+            parts += [(end, basis, 1.0), (start, basis, -1.0)]
         elif slot == 0:
-            add(end, basis, 0.5)
-            add(outer, basis, -0.5)
+            parts += [(end, basis, 0.5), (outer, basis, -0.5)]
         else:
-            add(outer, basis, 0.5)
-            add(start, basis, -0.5)
+            parts += [(outer, basis, 0.5), (start, basis, -0.5)]
+    found: dict[int, list[float]] = {}
+    for index, basis, scale in parts:
+        total = found.get(index)
+        if total is None:
+            found[index] = [0.0 + scale * value for value in basis]
+        else:
+            for power, value in enumerate(basis):
+                total[power] += scale * value
     return start, end, sorted((index, tuple(g)) for index, g in found.items())
+
+
+@functools.lru_cache(maxsize=4096)
+def _calibrated(
+    focals: tuple[float, ...],
+) -> tuple[list[float], list[int], list[int | None]]:
+    """The distinct calibrated focal lengths, ascending, and for each the
+    first and the second calibration (in the order met) at it; a focal
+    length that is not finite is never liblensfun's nearest."""
+    first: dict[float, int] = {}
+    second: dict[float, int] = {}
+    for index, calibrated in enumerate(focals):
+        if not math.isfinite(calibrated):
+            continue
+        if calibrated in first:
+            second.setdefault(calibrated, index)
+        else:
+            first[calibrated] = index
+    distinct = sorted(first)
+    return distinct, [first[f] for f in distinct], [second.get(f) for f in distinct]
 
 
 def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:

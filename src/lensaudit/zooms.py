@@ -341,8 +341,8 @@ _RADIUS_BOXES = 8
 #: units in the last place a few dozen operations can lose).
 _ROUNDING = 1e-12
 #: Halvings of the search for the radius a box is checked to (any radius
-#: where the middle model is past the image serves; this finds one to ~1e-15).
-_RADIUS_HALVINGS = 52
+#: where the middle model is past the image serves; this finds one to ~1e-9).
+_RADIUS_HALVINGS = 30
 _MOST_TERMS = 3  # coefficients of a model at most (ptlens); fewer are padded with zero terms
 CLEAR, FOLDS, UNDECIDED = "clear", "folds", "undecided"
 
