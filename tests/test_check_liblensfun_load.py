@@ -61,7 +61,7 @@ def real_files() -> list[Path]:
 
 def verdict(data: bytes) -> tuple[int | None, int | None]:
     """lensaudit's verdict: (line where liblensfun stops, lenses it keeps), or (None, None)."""
-    refusal = read.read_bytes(data, "test.xml").refusal
+    refusal = read.read_bytes(data, "test.xml", refusals=True).refusal
     return (None, None) if refusal is None else (refusal[0], refusal[2])
 
 
@@ -251,13 +251,13 @@ def test_mutated_real_files_are_refused_where_liblensfun_refuses_them(file_index
 def walked_verdict(data: bytes) -> tuple | None:
     """The reader's refusal with every element walked (the screen off)."""
     with mock.patch.object(tables.FileReader, "screen", False):
-        return read.read_bytes(data, "test.xml").refusal
+        return read.read_bytes(data, "test.xml", refusals=True).refusal
 
 
 @mutated_real_files
 def test_screen_never_vouches_for_what_the_walk_refuses(file_index, mutations):
     data = mutated(file_index, mutations)
-    assert read.read_bytes(data, "test.xml").refusal == walked_verdict(data)
+    assert read.read_bytes(data, "test.xml", refusals=True).refusal == walked_verdict(data)
 
 
 def test_bundled_database_is_walked_only_where_liblensfun_refuses():
@@ -270,7 +270,9 @@ def test_bundled_database_is_walked_only_where_liblensfun_refuses():
         return found
 
     with mock.patch.object(liblensfun, "piece_refusal", counted):
-        refused = [read.read_bytes(p.read_bytes(), p.name).refusal for p in real_files()]
+        refused = [
+            read.read_bytes(p.read_bytes(), p.name, refusals=True).refusal for p in real_files()
+        ]
     assert walked and None not in walked
     assert len(walked) == sum(refusal is not None for refusal in refused)
 
@@ -309,4 +311,4 @@ def test_focal_lengths_and_apertures_guessed_as_liblensfun_guesses_them(model, i
         + b"</lensdatabase>\n"
     )
     assert verdict(data) == liblensfun_verdict(data)
-    assert read.read_bytes(data, "test.xml").refusal == walked_verdict(data)
+    assert read.read_bytes(data, "test.xml", refusals=True).refusal == walked_verdict(data)

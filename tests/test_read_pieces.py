@@ -21,18 +21,20 @@ def tables_text(tables: FileTables) -> str:
     """Everything read of a file, as text (NaN equal to NaN, 0.0 apart from -0.0),
     where liblensfun stops reading it included."""
     assert "refusal" in FileTables.STORED
-    values = [getattr(tables, name) for name in FileTables.STORED]
+    values = [getattr(tables, name) for name in FileTables.STORED] + [tables.refusal_judged]
     values += [tables.vignetting, tables.tca, tables.lens_of_vignetting, tables.lens_of_tca]
     return repr(values)
 
 
-def read_both(contents: list[bytes], calibrations: bool = False) -> tuple[list[str], list[str]]:
+def read_both(
+    contents: list[bytes], calibrations: bool = False, refusals: bool = True
+) -> tuple[list[str], list[str]]:
     """Each content read alone, and all of them read in turn with one memo."""
     pieces = read.Pieces()
-    alone = [tables_text(read.read_bytes(d, "f.xml", calibrations=calibrations)) for d in contents]
+    options = {"calibrations": calibrations, "refusals": refusals}
+    alone = [tables_text(read.read_bytes(d, "f.xml", **options)) for d in contents]
     with_memo = [
-        tables_text(read.read_bytes(d, "f.xml", calibrations=calibrations, pieces=pieces))
-        for d in contents
+        tables_text(read.read_bytes(d, "f.xml", pieces=pieces, **options)) for d in contents
     ]
     return alone, with_memo
 
@@ -44,6 +46,23 @@ def test_real_file_versions_read_with_the_memo_as_alone(tmp_path):
     assert with_memo == alone
     alone, with_memo = read_both(versions[:150], calibrations=True)
     assert with_memo == alone
+    alone, with_memo = read_both(versions[:150], refusals=False)  # as scan and history read
+    assert with_memo == alone
+
+
+def test_what_liblensfun_refuses_is_judged_only_when_asked_for(tmp_path):
+    data = (
+        b'<lensdatabase version="2"><lens><maker>A</maker><model>B</model>'
+        b"<mount>M</mount><bogus/></lens></lensdatabase>"
+    )
+    assert read.read_bytes(data, "a.xml", refusals=True).refusal is not None
+    plain = read.read_bytes(data, "a.xml")
+    assert (plain.refusal, plain.refusal_judged) == (None, False)
+    # Tables kept without the judgement are read again where it is asked for.
+    cache = read.Cache(tmp_path / "cache")
+    read.read_bytes(data, "a.xml", cache=cache)
+    again = read.read_bytes(data, "a.xml", cache=cache, refusals=True)
+    assert again.refusal_judged and again.refusal is not None
 
 
 LENS = """    <lens>

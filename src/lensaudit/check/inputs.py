@@ -190,7 +190,9 @@ def last_readable(
         if data is None or data in tried:
             continue
         tried.add(data)
-        tables = reader.read_bytes(data, source.display, cache=cache, calibrations=True)
+        tables = reader.read_bytes(
+            data, source.display, cache=cache, calibrations=True, refusals=True
+        )
         if tables.status == STATUS_OK:
             return replace(source, data=data, origin=replace(origin, commit=commit)), commit
     return None

@@ -144,7 +144,7 @@ def parse_sources(
     contents it has met are not parsed again. A source without data (it
     could not be read) is a file of status ``unreadable``."""
     readable = [(s.data, s.display, s.path) for s in sources if s.data is not None]
-    tables = iter(reader.read_contents(readable, cache, calibrations=True))
+    tables = iter(reader.read_contents(readable, cache, calibrations=True, refusals=True))
     del readable  # the bytes of files on disk are not kept once read (see below)
     parsed = []
     for source in sources:

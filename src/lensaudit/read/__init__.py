@@ -23,6 +23,7 @@ from . import liblensfun, parallel, paths, xml
 from .cache import Cache, content_digest
 from .paths import DatabaseSource, Paths, display_path, expand, resolve
 from .records import (
+    NOT_JUDGED,
     STATUS_OK,
     STATUS_UNREADABLE,
     DistortionEntry,
@@ -86,7 +87,11 @@ class Database:
 
 
 def read(
-    paths_given: Paths = None, *, cache: Cache | None = None, calibrations: bool = False
+    paths_given: Paths = None,
+    *,
+    cache: Cache | None = None,
+    calibrations: bool = False,
+    refusals: bool = False,
 ) -> Database:
     """Read a Lensfun database: directories and/or XML files, where a Lensfun
     checkout means its ``data/db``; without paths, the checkout around the
@@ -97,11 +102,14 @@ def read(
     files are statuses in their tables instead.
     """
     source = resolve(paths_given)
-    return Database(source, read_files(expand(source.paths), cache, calibrations))
+    return Database(source, read_files(expand(source.paths), cache, calibrations, refusals))
 
 
 def read_files(
-    targets: Iterable[tuple[Path, str]], cache: Cache | None = None, calibrations: bool = False
+    targets: Iterable[tuple[Path, str]],
+    cache: Cache | None = None,
+    calibrations: bool = False,
+    refusals: bool = False,
 ) -> list[FileTables]:
     """The tables of (path, display name) pairs, as :func:`expand` gives them;
     a file that cannot be read is a table of status ``unreadable``."""
@@ -112,7 +120,7 @@ def read_files(
         except OSError as error:
             found.append(unreadable(name, path, f"cannot read file: {paths.reason(error)}"))
     contents = [item for item in found if isinstance(item, tuple)]
-    made = iter(read_contents(contents, cache, calibrations))
+    made = iter(read_contents(contents, cache, calibrations, refusals))
     return [item if isinstance(item, FileTables) else next(made) for item in found]
 
 
@@ -120,12 +128,13 @@ def read_contents(
     contents: Sequence[tuple[bytes, str, Path | None]],
     cache: Cache | None = None,
     calibrations: bool = False,
+    refusals: bool = False,
 ) -> list[FileTables]:
     """The tables of files' contents, given as (bytes, display name, path or
     None). Contents the cache does not know are parsed on every core
     (:func:`~lensaudit.read.parallel.map_sized`); with a cache, what is read
     is kept there and the cache saved."""
-    found = _tables(contents, cache, calibrations)
+    found = _tables(contents, cache, calibrations, refusals)
     if cache is not None:
         cache.save()
     return found
@@ -138,6 +147,7 @@ def read_bytes(
     *,
     cache: Cache | None = None,
     calibrations: bool = False,
+    refusals: bool = False,
     pieces: Pieces | None = None,
 ) -> FileTables:
     """The tables of one file's content; ``name`` is how it is shown, ``path``
@@ -145,13 +155,14 @@ def read_bytes(
     what it holds for the same bytes is used, and what is read is kept (the
     caller saves the cache). With ``pieces``, lenses met before in other
     contents are not parsed again (see :class:`~lensaudit.read.xml.Pieces`)."""
-    return _tables([(data, name, path)], cache, calibrations, pieces)[0]
+    return _tables([(data, name, path)], cache, calibrations, refusals, pieces)[0]
 
 
 def _tables(
     contents: Sequence[tuple[bytes, str, Path | None]],
     cache: Cache | None,
     calibrations: bool,
+    refusals: bool = False,
     pieces: Pieces | None = None,
 ) -> list[FileTables]:
     """The tables of contents: from the cache where it has them (each content's
@@ -160,12 +171,12 @@ def _tables(
     todo: list[tuple[bytes, str, Path | None, bytes]] = []
     for data, name, path in contents:
         digest = content_digest(data) if cache is not None else b""
-        tables = _cached(digest, name, path, cache, calibrations)
+        tables = _cached(digest, name, path, cache, calibrations, refusals)
         if tables is None:
             todo.append((data, name, path, digest))
         found.append(tables)
     if todo:
-        parse = partial(_parsed_values, calibrations=calibrations, pieces=pieces)
+        parse = partial(_parsed_values, calibrations=calibrations, refusals=refusals, pieces=pieces)
         sizes = [len(data) for data, *_ in todo]
         values = parallel.map_sized(parse, [data for data, *_ in todo], sizes)
         made = iter(_made(todo, values, cache, calibrations))
@@ -174,9 +185,15 @@ def _tables(
 
 
 def _cached(
-    digest: bytes, name: str, path: Path | None, cache: Cache | None, calibrations: bool
+    digest: bytes,
+    name: str,
+    path: Path | None,
+    cache: Cache | None,
+    calibrations: bool,
+    refusals: bool = False,
 ) -> FileTables | None:
-    """The tables the cache holds for the content of ``digest``, or None."""
+    """The tables the cache holds for the content of ``digest``, or None (also
+    where ``refusals`` are asked for and the tables kept were read without)."""
     if cache is None:
         return None
     stored = cache.get(digest, "tables")
@@ -185,6 +202,8 @@ def _cached(
         return None
     try:
         tables = FileTables(name, path, digest, stored)  # type: ignore[arg-type]
+        if refusals and not tables.refusal_judged:
+            return None  # read again, judged; kept so for the next run
         if calibrations:
             tables.set_calibrations(stored_calibrations)  # type: ignore[arg-type]
     except (TypeError, ValueError):
@@ -213,10 +232,13 @@ def _made(
     return made
 
 
-def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None) -> tuple:
+def _parsed_values(
+    data: bytes, calibrations: bool, refusals: bool = False, pieces: Pieces | None = None
+) -> tuple:
     """Parse one file's content: (its :attr:`FileTables.STORED` values, its
-    calibrations (see :meth:`FileTables.set_calibrations`) or None), as plain data."""
-    parsed, found = xml.parse(data, partial(FileReader, calibrations), READ, pieces)
+    calibrations (see :meth:`FileTables.set_calibrations`) or None), as plain
+    data; with ``refusals``, where liblensfun stops reading it judged."""
+    parsed, found = xml.parse(data, partial(FileReader, calibrations, refusals), READ, pieces)
     distortion, lens_of_row, omitted = found.distortion, found.lens_of_row, found.omitted
     vignetting, tca = found.vignetting, found.tca
     lens_of_vignetting, lens_of_tca = found.lens_of_vignetting, found.lens_of_tca
@@ -238,7 +260,8 @@ def _parsed_values(data: bytes, calibrations: bool, pieces: Pieces | None = None
             lens_of_tca = [None, *lens_of_tca]  # type: ignore[misc]
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
               found.lenses, distortion, lens_of_row, omitted, found.cameras,
-              found.mount_names, _refusal(data, parsed, found))  # fmt: skip
+              found.mount_names,
+              _refusal(data, parsed, found) if refusals else NOT_JUDGED)  # fmt: skip
     if not calibrations:
         return stored, None
     return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)

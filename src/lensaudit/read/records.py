@@ -96,6 +96,10 @@ class DistortionEntry(
 ROW_FIELDS = tuple(ENTRY_FIELDS)[1:]
 
 
+#: The stored refusal of tables read without judging what liblensfun refuses.
+NOT_JUDGED = False
+
+
 class SourceFile(namedtuple("SourceFile", ("name", "path", "entries", "error"), defaults=("",))):
     """A file that was read: its display ``name``, absolute ``path``, the number of
     distortion ``entries`` read from it, and its ``error`` ("" if none)."""
@@ -161,7 +165,9 @@ class FileTables:
     ``lenses`` before that point, which liblensfun holds; None where it loads
     the file. For a file that is not well-formed, the line is libxml2's and
     the reason starts with "not well-formed XML", unless liblensfun stops
-    earlier.
+    earlier. It is judged only when asked for (``refusals=True`` of
+    :func:`lensaudit.read.read` and the others); ``refusal_judged`` says
+    whether it was.
     ``vignetting`` and ``tca`` are their rows (see
     :mod:`lensaudit.read.tables`), None until read; ``lens_of_vignetting`` and
     ``lens_of_tca`` the lens index of each.
@@ -173,7 +179,7 @@ class FileTables:
     __slots__ = (
         "name", "path", "digest", "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
-        "refusal", "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
+        "refusal", "refusal_judged", "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
     )  # fmt: skip
 
     #: The fields that the cache keeps, in order (all but name, path and digest).
@@ -192,8 +198,10 @@ class FileTables:
             lenses, self.distortion, self.lens_of_row, self.omitted, cameras, self.mount_names,
             refusal,
         ) = values  # fmt: skip
+        # NOT_JUDGED (False) where the reader was not asked to judge it.
+        self.refusal_judged = refusal is not NOT_JUDGED
         self.refusal: tuple[int, str, int] | None = (
-            tuple(refusal) if refusal is not None else None  # type: ignore[assignment]
+            tuple(refusal) if refusal not in (None, NOT_JUDGED) else None  # type: ignore[assignment]
         )
         self.lenses = [Lens(*lens) for lens in lenses]
         self.cameras = [Camera(*camera) for camera in cameras]

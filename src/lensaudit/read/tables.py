@@ -527,12 +527,14 @@ class FileReader:
     """Reads the pieces of one document (see :func:`lensaudit.read.xml.parse`)
     into its tables: lens rows, distortion rows with the lens index and
     omitted coefficients of each, and with ``calibrations``, vignetting and
-    TCA rows (else None)."""
+    TCA rows (else None); with ``refusals``, where liblensfun stops reading
+    it (see :mod:`lensaudit.read.liblensfun`)."""
 
-    def __init__(self, calibrations: bool) -> None:
+    def __init__(self, calibrations: bool, refusals: bool = False) -> None:
         self.tags = (_DISTORTION, VIGNETTING, TCA) if calibrations else (_DISTORTION,)
+        self.judge = refusals
         #: What a lens's tables depend on besides its tree (for :class:`~.xml.Pieces`).
-        self.kind = self.tags
+        self.kind = (self.tags, refusals)
         self.lenses: list[tuple] = []
         self.distortion: list[tuple] = []
         self.lens_of_row: list[int | None] = []
@@ -557,12 +559,14 @@ class FileReader:
     def document(self, data: bytes) -> None:
         """Look at the bytes of the document (well-formed, line ends normalized)
         whose pieces come next, for what liblensfun surely accepts."""
-        if self.screen:
+        if self.screen and self.judge:
             self._shaped_until = liblensfun.shaped_until(data)
 
     def root(self, element: etree._Element, line: int) -> None:
         """Judge the document's root element, whose start tag ends on ``line``
         (liblensfun reads it before any piece)."""
+        if not self.judge:
+            return
         found = liblensfun.root_refusal(element, line)
         self._root_refusal = (*found, 0) if found is not None else None
 
@@ -580,14 +584,14 @@ class FileReader:
         if tag == "camera":
             camera = read_camera(piece, line_of)
             self.cameras.append(camera)
-            accepted = liblensfun.camera_accepted(*camera[1:4], camera[5])
+            accepted = self.judge and liblensfun.camera_accepted(*camera[1:4], camera[5])
         elif tag == "mount":
             names = mount_names(piece, line_of)
             self.mount_names += names
-            accepted = liblensfun.mount_accepted([name for _, name in names])
+            accepted = self.judge and liblensfun.mount_accepted([name for _, name in names])
         lenses, found = elements_in_context(piece, self.tags, first_lens, line_of)
         self.lenses += lenses
-        if self.refusal is None:
+        if self.judge and self.refusal is None:
             if tag == "lens":  # its own row comes first
                 row = lenses[0]
                 accepted = liblensfun.lens_accepted(row[2], row[3], row[_LENS_CONTENT])
