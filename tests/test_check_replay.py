@@ -207,3 +207,14 @@ def test_a_file_level_finding_is_justified_by_any_change_to_its_file():
     blocks = {"db/a.xml": replay_check.lens_blocks(TEXT)}
     assert replay_check.justified([("db/a.xml", 3)], True, touched, blocks)
     assert not replay_check.justified([("db/c.xml", 3)], True, touched, blocks)
+
+
+@needs_history
+def test_a_refusal_the_broken_baseline_file_had_is_known(history):
+    """04906284 adds a Fujifilm X20 to another file; compact-sony.xml was
+    already not well-formed, and liblensfun already stopped reading it at
+    line 774: the baseline file replaced by its last readable version still
+    counts both of its file-level findings."""
+    full = replay_check.git(history, "rev-parse", "04906284").decode().strip()
+    (row,) = replay_check.replay(history, [full])
+    assert row.verdict == replay_check.PASS, row.findings

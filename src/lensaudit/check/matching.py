@@ -15,6 +15,7 @@ from dataclasses import fields, replace
 from .. import read as reader
 from ..read.records import STATUS_OK, DistortionEntry
 from .inputs import last_readable
+from .loading import liblensfun_refusals
 from .parsing import ParsedSource, parse_sources
 from .result import (
     BASELINE_UNREADABLE,
@@ -92,8 +93,10 @@ def readable_baseline(
     changed it (read through ``cache``, if given).
 
     Also returns the file-level findings of the replaced files (the baseline
-    had them, whatever the older version holds), the (name, commit) of each
-    replacement, and the names of files left without a readable version.
+    had them, whatever the older version holds: its ``xml-error``, and where
+    liblensfun stops reading it, ``liblensfun-refuses``), the (name, commit)
+    of each replacement, and the names of files left without a readable
+    version.
     """
     read = list(read)
     kept: list[Identified] = []
@@ -107,6 +110,7 @@ def readable_baseline(
             incomparable.add(file.source.file_name)
             continue
         kept.append(file_identified(file))
+        kept += liblensfun_refusals(file)
         read[index] = parse_sources([older[0]], cache)[0]
         replaced.append((file.source.file_name, older[1]))
     return read, kept, replaced, incomparable
