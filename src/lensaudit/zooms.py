@@ -335,6 +335,10 @@ class _JointProgram:
 
 #: How far a box of focal lengths is halved before it is left undecided.
 _MAX_DEPTH = 16
+#: Boxes of one interval left to halve, at most: an interval that needs more
+#: (nothing in it can be proven, e.g. bounds that overflow) is left undecided
+#: rather than halved into 2^16 boxes.
+_MAX_BOXES = 64
 #: Radii boxes from the centre to the radius checked, per box of focal lengths.
 _RADIUS_BOXES = 8
 #: Rounding allowance, relative to the size of the terms (far above the few
@@ -494,15 +498,19 @@ class _Intervals:
                 radius = _radius_past(rows, self.terms[box], reach, value / self.threshold, r_max)
                 clear = live & self._clear(box, t_low, t_high, radius, reach)
             left = live & ~clear
-            if depth == _MAX_DEPTH:
-                for position in np.flatnonzero(left):
+            crowded = np.bincount(box[left], minlength=count) > _MAX_BOXES // 2
+            if depth == _MAX_DEPTH or crowded.any():
+                last = left if depth == _MAX_DEPTH else left & crowded[box]
+                for position in np.flatnonzero(last):
                     interval = int(box[position])
                     if verdicts[interval] is None:
                         low, high = self.bounds[interval]
                         verdicts[interval] = Between(
                             low, high, UNDECIDED, float(focal[position]), float(value[position])
                         )
-                break
+                if depth == _MAX_DEPTH:
+                    break
+                left &= ~crowded[box]
             box, middle = box[left], middle[left]
             t_low, t_high = t_low[left], t_high[left]
             box = np.concatenate([box, box])
