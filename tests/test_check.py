@@ -545,3 +545,25 @@ def test_a_new_twin_above_an_old_one_with_tca_is_placed_the_same_from_the_cache(
     for run in ("cold", "warm"):
         result = check(tmp_path / "after", baseline=tmp_path / "before", cache=True)
         assert [(f.code, f.line) for f in result.findings] == [("duplicate-lens", 2)], run
+
+
+def test_a_baseline_file_the_change_left_alone_is_not_analysed_again(tmp_path, monkeypatch):
+    from lensaudit.check import findings
+
+    for name in ("before", "after"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "same.xml").write_text(lens_xml(FOLDING))
+    (tmp_path / "before" / "changed.xml").write_text(lens_xml(FINE))
+    (tmp_path / "after" / "changed.xml").write_text(lens_xml(FINE.replace("0.01", "0.02")))
+    analysed: list[str] = []
+    original = findings._file_findings
+
+    def counted(read, *rest):
+        analysed.extend(Path(file.source.display).name for file in read)
+        return original(read, *rest)
+
+    monkeypatch.setattr(findings, "_file_findings", counted)
+    result = check(tmp_path / "after", baseline=tmp_path / "before", cache=True)
+    assert sorted(analysed) == ["changed.xml", "changed.xml", "same.xml"]
+    assert ("fold-in-image", True) in [(f.code, f.known) for f in result.findings]
+    assert all(f.known for f in result.findings) and result.resolved == 0

@@ -252,8 +252,10 @@ def _check(
     before_read = parse_sources(baseline_sources(label, source.paths), cache)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
     # What the baseline holds places each duplicate on the one of its two the change added.
-    files, current = analyse_parsed(read, margin, verbose, cache, Known.of(before_read))
-    _, before = analyse_parsed(before_read, margin, verbose, cache)
+    own: dict[bytes, list] = {}  # what each file makes alone, by its bytes' digest
+    files, current = analyse_parsed(read, margin, verbose, cache, Known.of(before_read), own)
+    # The baseline's files the change left alone make what they made in the database.
+    _, before = analyse_parsed(before_read, margin, verbose, cache, None, own)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)
     if notices:

@@ -87,11 +87,17 @@ def analyse_parsed(
     verbose: bool,
     cache: Cache | None = None,
     known: Known | None = None,
+    own: dict[bytes, list[Identified]] | None = None,
 ) -> tuple[list[CheckedFile], list[Identified]]:
     """:func:`analyse` of files already parsed; findings in file and line order.
     The metrics of a file come from ``cache`` where it has them (see
     :func:`lensaudit.pipeline.file_metrics`); ``known``, what a baseline
-    holds, places each duplicate on the one of its two the change added."""
+    holds, places each duplicate on the one of its two the change added.
+
+    ``own`` maps the digest of a file's bytes to the findings it makes alone
+    (:func:`file_findings`): those of a file it holds are taken from it, not
+    worked out again (a baseline shares most of its files with the database
+    checked), and those worked out are added to it."""
     files = [
         CheckedFile(
             f.source.display, f.source.path, f.count, f.problem.message if f.problem else ""
@@ -108,7 +114,7 @@ def analyse_parsed(
             add(index, file_identified(file))
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
-    for index, items in enumerate(file_findings(read, margin, verbose, cache, known)):
+    for index, items in enumerate(file_findings(read, margin, verbose, cache, known, own)):
         for item in items:
             add(index, item)
     for index, item in duplicate_lenses(read, known):
@@ -128,11 +134,41 @@ def file_findings(
     verbose: bool,
     cache: Cache | None = None,
     known: Known | None = None,
+    own: dict[bytes, list[Identified]] | None = None,
 ) -> list[list[Identified]]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
     calibrations, vignetting at the calibration script's starting values and
-    focal-series outliers (none for a file with a file-level problem)."""
+    focal-series outliers (none for a file with a file-level problem). A
+    file whose digest ``own`` holds has the findings it holds there (the
+    same bytes make the same findings); the others are worked out and added
+    to ``own``."""
+    if own is None:
+        return _file_findings(read, margin, verbose, cache, known)
+    found: list[list[Identified]] = [[] for _ in read]
+    todo = []
+    for index, file in enumerate(read):
+        digest = file.tables.digest
+        if digest and digest in own:
+            found[index] = list(own[digest])
+        else:
+            todo.append(index)
+    made = _file_findings([read[index] for index in todo], margin, verbose, cache, known)
+    for index, items in zip(todo, made, strict=True):
+        found[index] = items
+        if read[index].tables.digest:
+            own[read[index].tables.digest] = items
+    return found
+
+
+def _file_findings(
+    read: Sequence[ParsedSource],
+    margin: float,
+    verbose: bool,
+    cache: Cache | None,
+    known: Known | None,
+) -> list[list[Identified]]:
+    """:func:`file_findings` of files, every one worked out."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
