@@ -563,6 +563,9 @@ def test_a_baseline_file_the_change_left_alone_is_not_analysed_again(tmp_path, m
         return original(read, *rest)
 
     monkeypatch.setattr(findings, "_file_findings", counted)
+    assert check(tmp_path / "after", baseline=tmp_path / "before").findings  # no cache
+    assert sorted(analysed) == ["changed.xml", "changed.xml", "same.xml"]
+    analysed.clear()
     result = check(tmp_path / "after", baseline=tmp_path / "before", cache=True)
     assert sorted(analysed) == ["changed.xml", "changed.xml", "same.xml"]
     assert ("fold-in-image", True) in [(f.code, f.known) for f in result.findings]

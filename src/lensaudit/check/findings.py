@@ -148,7 +148,7 @@ def file_findings(
     found: list[list[Identified]] = [[] for _ in read]
     todo = []
     for index, file in enumerate(read):
-        digest = file.tables.digest
+        digest = file.digest
         if digest and digest in own:
             found[index] = list(own[digest])
         else:
@@ -156,8 +156,8 @@ def file_findings(
     made = _file_findings([read[index] for index in todo], margin, verbose, cache, known)
     for index, items in zip(todo, made, strict=True):
         found[index] = items
-        if read[index].tables.digest:
-            own[read[index].tables.digest] = items
+        if read[index].digest:
+            own[read[index].digest] = items
     return found
 
 

@@ -11,6 +11,7 @@ from functools import cached_property
 
 from .. import calibrations
 from .. import read as reader
+from ..read.cache import content_digest
 from ..read.records import (
     STATUS_NOT_DATABASE,
     STATUS_OK,
@@ -75,12 +76,14 @@ class ParsedSource:
     stands for the file; :attr:`entries` and :attr:`lens_of_entry` leave it
     out, so that they hold one item per ``<distortion>`` element found, as
     :attr:`count` counts them (for a file that is not well-formed, those
-    libxml2's recovery mode still finds).
+    libxml2's recovery mode still finds). ``digest`` is the digest of its
+    bytes (b"" for a file that could not be read).
     """
 
     source: Source
     tables: FileTables
     problem: Finding | None = None
+    digest: bytes = b""
 
     @property
     def count(self) -> int:
@@ -148,11 +151,14 @@ def parse_sources(
     del readable  # the bytes of files on disk are not kept once read (see below)
     parsed = []
     for source in sources:
+        digest = b""
         if source.data is None:
             found = reader.unreadable(source.display, source.path, source.error)
         else:
             found = next(tables)
+            # The reader's, where a cache made it take one.
+            digest = found.digest or content_digest(source.data)
             if source.origin is None:  # only a git baseline's bytes are looked at again
                 source = replace(source, data=b"")
-        parsed.append(ParsedSource(source, found, file_finding(found, source.display)))
+        parsed.append(ParsedSource(source, found, file_finding(found, source.display), digest))
     return parsed
