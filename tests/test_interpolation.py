@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lensaudit.interpolation import interpolated, spline_terms, weights
+from lensaudit.interpolation import interpolated, interval_terms, spline_terms, weights
 from liblensfun_master import interpolate_distortion, lenses, library
 
 NAMES = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "poly5": ("k1", "k2")}
@@ -134,3 +134,11 @@ def test_the_spline_takes_the_calibrations_liblensfuns_loop_takes(focals, focal)
     used = {index for index, _ in terms}
     expected = {slots[1], slots[2]} | {s for s in (slots[0], slots[3]) if s is not None}
     assert used == expected
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.sampled_from([8.0, 10.0, 12.0, 18.0, 24.0, 35.0, 55.0]), min_size=2, max_size=9))
+def test_every_interval_at_once_is_what_the_spline_takes_at_its_middle(focals):
+    for low, high, start, end, terms in interval_terms(focals):
+        assert (start, end, terms) == spline_terms(focals, (low + high) / 2)
+    assert len(interval_terms(focals)) == len(set(focals)) - 1

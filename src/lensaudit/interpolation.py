@@ -54,6 +54,34 @@ def spline_terms(
     if position < len(distinct) and distinct[position] == focal:
         index = first[position]
         return None, None, [(index, (focal / focals[index], 0.0, 0.0, 0.0))]
+    slots = _slots(distinct, first, second, position)
+    start, end = slots[1], slots[2]
+    if start is None or end is None:
+        side = start if start is not None else end
+        return None, None, [] if side is None else [(side, (focal / focals[side], 0.0, 0.0, 0.0))]
+    return start, end, _hermite(slots)
+
+
+def interval_terms(
+    focals: Sequence[float],
+) -> list[tuple[float, float, int, int, list[tuple[int, tuple[float, ...]]]]]:
+    """:func:`spline_terms` of every interval between neighbouring distinct
+    calibrated ``focals`` at once: (low, high, the calibration above, the
+    one below, [(index, g)]), in ascending order."""
+    distinct, first, second = _calibrated(tuple(focals))
+    found = []
+    for position in range(1, len(distinct)):
+        slots = _slots(distinct, first, second, position)
+        found.append((distinct[position - 1], distinct[position], slots[1], slots[2],
+                      _hermite(slots)))  # fmt: skip
+    return found
+
+
+def _slots(
+    distinct: list[float], first: list[int], second: list[int | None], position: int
+) -> list[int | None]:
+    """liblensfun's four spline slots for a focal length between
+    ``distinct[position - 1]`` and ``distinct[position]`` (see :func:`_calibrated`)."""
     slots: list[int | None] = [None] * 4
     if position < len(distinct):  # the calibrations above
         slots[1] = first[position]
@@ -65,10 +93,13 @@ def spline_terms(
         slots[3] = second[position - 1] if second[position - 1] is not None else (
             first[position - 2] if position > 1 else None
         )  # fmt: skip
+    return slots
+
+
+def _hermite(slots: list[int | None]) -> list[tuple[int, tuple[float, ...]]]:
+    """[(index, g)] of the Hermite spline between the calibrations of slots
+    1 and 2 (both there), with tangents from the outer slots 0 and 3."""
     start, end = slots[1], slots[2]
-    if start is None or end is None:
-        side = start if start is not None else end
-        return None, None, [] if side is None else [(side, (focal / focals[side], 0.0, 0.0, 0.0))]
     # The spline runs from the calibration above (t = 0) to the one below (t = 1).
     parts = [(start, _H00, 1.0), (end, _H01, 1.0)]
     for slot, basis in ((0, _H10), (3, _H11)):
@@ -89,7 +120,7 @@ def spline_terms(
         else:
             for power, value in enumerate(basis):
                 total[power] += scale * value
-    return start, end, sorted((index, tuple(g)) for index, g in found.items())
+    return sorted((index, tuple(g)) for index, g in found.items())  # type: ignore[misc]
 
 
 @functools.lru_cache(maxsize=4096)

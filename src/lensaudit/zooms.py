@@ -402,19 +402,14 @@ def between_all(
 @functools.lru_cache(maxsize=4096)
 def _spline_intervals(focals: tuple[float, ...]) -> tuple[tuple, ...]:
     """The intervals between neighbouring calibrated ``focals`` (in the order
-    liblensfun meets them): (low, high, start, end, terms) with
-    :func:`lensaudit.interpolation.spline_terms` inside each; a function of
-    the focal lengths alone, so one lens's calibrations share it with the
-    same lens in a baseline."""
-    from .interpolation import spline_terms
+    liblensfun meets them): (low, high, start, end, terms), see
+    :func:`lensaudit.interpolation.interval_terms`; a function of the focal
+    lengths alone, so one lens's calibrations share it with the same lens in
+    a baseline."""
+    from .interpolation import interval_terms
 
-    found = []
-    distinct = sorted(set(focals))
-    for low, high in zip(distinct, distinct[1:], strict=False):
-        start, end, terms = spline_terms(focals, (low + high) / 2)
-        assert start is not None and end is not None
-        found.append((low, high, start, end, tuple(terms)))
-    return tuple(found)
+    return tuple((low, high, start, end, tuple(terms))
+                 for low, high, start, end, terms in interval_terms(focals))  # fmt: skip
 
 
 class _Intervals:
