@@ -16,7 +16,7 @@ and its own distortion entries' values (:func:`lens_contents`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 from ..read.records import DistortionEntry
 from .matching import entry_content, lens_identity
@@ -37,27 +37,48 @@ from .result import (
 )
 
 
-@dataclass(frozen=True)
 class Known:
     """What a baseline holds, as the duplicate rules place their findings:
     its lenses (name key and :func:`lens_contents`) and its distortion
-    entries (lens by name and :func:`entry_content`)."""
+    entries (lens by name and :func:`entry_content`). Worked out only when a
+    duplicate asks, and then only for the lenses of its name: a database has
+    thousands of entries, and hardly a duplicate."""
 
-    lenses: frozenset = frozenset()
-    entries: frozenset = frozenset()
+    def __init__(self, read: Sequence[ParsedSource] = ()) -> None:
+        self._read = [file for file in read if file.problem is None]
+        self._entries: dict[tuple, list[DistortionEntry]] | None = None
+        self._lenses: dict[tuple, list[tuple[ParsedSource, int]]] | None = None
+        self._contents: dict[int, list[tuple]] = {}
 
     @classmethod
     def of(cls, read: Sequence[ParsedSource]) -> Known:
-        """The lenses and entries of the files of a baseline that parsed."""
-        lenses, entries = set(), set()
-        for file in read:
-            if file.problem is not None:
-                continue
-            for lens, content in zip(file.lenses, lens_contents(file), strict=True):
-                lenses.add((_lens_key(lens), content))
-            for entry in file.entries:
-                entries.add((lens_identity(entry.maker, entry.lens), entry_content(entry)))
-        return cls(frozenset(lenses), frozenset(entries))
+        """What the files of a baseline that parsed hold."""
+        return cls(read)
+
+    def has_entry(self, name: tuple, content: tuple) -> bool:
+        """Whether the baseline has a distortion entry of this content for a
+        lens of this name (:func:`~.matching.lens_identity`)."""
+        if self._entries is None:
+            self._entries = {}
+            for file in self._read:
+                for entry in file.entries:
+                    key = lens_identity(entry.maker, entry.lens)
+                    self._entries.setdefault(key, []).append(entry)
+        return any(entry_content(entry) == content for entry in self._entries.get(name, ()))
+
+    def has_lens(self, key: tuple, content: tuple) -> bool:
+        """Whether the baseline has a lens of this name key with this content."""
+        if self._lenses is None:
+            self._lenses = {}
+            for file in self._read:
+                for lens in file.lenses:
+                    self._lenses.setdefault(_lens_key(lens), []).append((file, lens.index))
+        for file, index in self._lenses.get(key, ()):
+            if id(file) not in self._contents:
+                self._contents[id(file)] = lens_contents(file)
+            if self._contents[id(file)][index] == content:
+                return True
+        return False
 
 
 def _lens_key(lens: LensRecord) -> tuple:
@@ -95,7 +116,7 @@ def duplicate_focals(
             content = entry_content(entry)
             if known is not None and content != first_content:
                 name = lens_identity(entry.maker, entry.lens)
-                if (name, content) in known.entries and (name, first_content) not in known.entries:
+                if known.has_entry(name, content) and not known.has_entry(name, first_content):
                     # The change added the first: the finding goes there.
                     entry, earlier = earlier, entry
                     first_line, first_content, content = earlier.line, content, first_content
@@ -160,8 +181,8 @@ def duplicate_lenses(
             there_file, there = earlier_file, earlier
             if (
                 known is not None
-                and (key, content) in known.lenses
-                and (key, first_content) not in known.lenses
+                and known.has_lens(key, content)
+                and not known.has_lens(key, first_content)
             ):
                 # The change added the first: the finding goes there.
                 here_index, here_file, here = earlier_index, earlier_file, earlier
