@@ -134,10 +134,23 @@ def git_repository(path: Path, files: dict[str, str]) -> Path:
     """A git repository at ``path`` with one commit of ``files`` (name -> text)."""
     import subprocess
 
-    for name, text in files.items():
-        (path / name).parent.mkdir(parents=True, exist_ok=True)
-        (path / name).write_text(text)
+    path.mkdir(parents=True, exist_ok=True)
     environment = {**os.environ, **GIT_ENVIRONMENT}
-    for words in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
-        subprocess.run(["git", "-C", str(path), *words], check=True, env=environment)
+    subprocess.run(["git", "-C", str(path), "init", "-q"], check=True, env=environment)
+    git_commit(path, files, "one")
     return path
+
+
+def git_commit(repository: Path, files: dict[str, str], message: str, date: str = "") -> None:
+    """Write ``files`` (name -> text) into ``repository`` and commit them
+    (author and committer date ``date``, if given)."""
+    import subprocess
+
+    for name, text in files.items():
+        (repository / name).parent.mkdir(parents=True, exist_ok=True)
+        (repository / name).write_text(text)
+    environment = {**os.environ, **GIT_ENVIRONMENT}
+    if date:
+        environment |= {"GIT_AUTHOR_DATE": date, "GIT_COMMITTER_DATE": date}
+    for words in (["add", *files], ["commit", "-qm", message]):
+        subprocess.run(["git", "-C", str(repository), *words], check=True, env=environment)

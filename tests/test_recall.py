@@ -4,14 +4,13 @@ at the parent revision, counted on a hand-made history."""
 from __future__ import annotations
 
 import importlib.util
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from conftest import GIT_ENVIRONMENT
+from conftest import git_commit
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,12 +55,7 @@ def text(name: str, *elements: str, broken: bool = False) -> str:
 
 
 def commit(repository: Path, content: str, message: str) -> None:
-    path = repository / "data" / "db" / "db.xml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(content)
-    environment = {**os.environ, **GIT_ENVIRONMENT}
-    for words in (["add", "data/db/db.xml"], ["commit", "-qm", message]):
-        subprocess.run(["git", "-C", str(repository), *words], check=True, env=environment)
+    git_commit(repository, {"data/db/db.xml": content}, message)
 
 
 @pytest.fixture

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import importlib.util
 import math
-import os
 import random
 import subprocess
 import sys
@@ -14,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import GIT_ENVIRONMENT
+from conftest import git_commit
 from lensaudit.check import check
 from lensaudit.check.series import displacement
 
@@ -281,10 +280,8 @@ def load_script(name: str):
 def commit_database(repository: Path, date: str, *lenses: list[str]) -> None:
     """Commit data/db/db.xml holding ``lenses`` (see :func:`database`) at ``date``."""
     database(repository / "data" / "db", *lenses)
-    environment = {**os.environ, **GIT_ENVIRONMENT,
-                   "GIT_AUTHOR_DATE": date, "GIT_COMMITTER_DATE": date}  # fmt: skip
-    for words in (["add", "data/db/db.xml"], ["commit", "-qm", date]):
-        subprocess.run(["git", "-C", str(repository), *words], check=True, env=environment)
+    text = (repository / "data" / "db" / "db.xml").read_text()
+    git_commit(repository, {"data/db/db.xml": text}, date, date)
 
 
 @pytest.fixture
