@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
 from collections import Counter, defaultdict
@@ -85,7 +84,6 @@ VALUES = {
         for kind, spec in SPECS.items()
     },
 }
-_GIT_ENVIRONMENT = {"GIT_OPTIONAL_LOCKS": "0", "GIT_TERMINAL_PROMPT": "0", "LC_ALL": "C"}
 
 
 @dataclass(frozen=True)
@@ -121,15 +119,8 @@ class Change:
 
 
 def git(repository: Path, *arguments: str) -> str:
-    """Output of a git command (text); raises CalledProcessError on failure."""
-    return subprocess.run(
-        ["git", *arguments],
-        cwd=repository,
-        capture_output=True,
-        check=True,
-        text=True,
-        env={**os.environ, **_GIT_ENVIRONMENT},
-    ).stdout
+    """Output of a git command, as text (:func:`lensaudit.git.run`)."""
+    return gitlayer.run(repository, *arguments).decode("utf-8", "replace")
 
 
 def _number(value: object) -> object:
