@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import lens_xml
+
 HEAVY = ("numpy", "pandas", "matplotlib", "scipy", "lxml")
 
 # Runs the command line in this interpreter as the console command does (a
@@ -320,3 +322,15 @@ def test_nothing_but_the_reader_imports_lxml():
         modules_named(node, "lensaudit.read.xml", False) == ["lxml"]
         for node, _ in imports(reader / "xml.py")
     )
+
+
+def test_a_scan_does_not_load_liblensfuns_rules(cache_dir, tmp_path):
+    """What liblensfun refuses is check's question: a scan never imports its rules."""
+    arguments = ["scan", "-o", os.devnull, "--no-cache"]
+    assert imported_by(arguments, cache_dir, ("lensaudit.read.liblensfun",)) == set()
+    database = tmp_path / "db.xml"  # one that passes the check
+    database.write_text(lens_xml('<distortion model="poly3" focal="20" k1="0.01"/>'))
+    check = ["check", str(database), "-o", os.devnull, "--no-cache"]
+    assert imported_by(check, cache_dir, ("lensaudit.read.liblensfun",)) == {
+        "lensaudit.read.liblensfun"
+    }

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
-from . import liblensfun, parallel, paths, xml
+from . import parallel, paths, xml
 from .cache import Cache, content_digest
 from .paths import DatabaseSource, Paths, display_path, expand, resolve
 from .records import (
@@ -270,6 +270,8 @@ def _parsed_values(
 def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, str, int] | None:
     """Where liblensfun stops reading a file, why, and how many lenses it holds
     then (see :attr:`FileTables.refusal`)."""
+    from . import liblensfun  # only what is judged needs its rules
+
     # libxml2 has read a well-formed document as UTF-8 unless it declares another encoding.
     utf8_checked = parsed.status == STATUS_OK and not xml.declares_other_encoding(data)
     leading = liblensfun.leading_refusal(data, utf8_checked)

@@ -17,7 +17,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from operator import itemgetter
 
-from . import liblensfun
 from .records import (
     DEFAULT_ASPECT_RATIO,
     DEFAULT_CROP_FACTOR,
@@ -533,6 +532,10 @@ class FileReader:
     def __init__(self, calibrations: bool, refusals: bool = False) -> None:
         self.tags = (_DISTORTION, VIGNETTING, TCA) if calibrations else (_DISTORTION,)
         self.judge = refusals
+        if refusals:  # only a reader that judges it needs liblensfun's rules
+            from . import liblensfun
+
+            self._liblensfun = liblensfun
         #: What a lens's tables depend on besides its tree (for :class:`~.xml.Pieces`).
         self.kind = (self.tags, refusals)
         self.lenses: list[tuple] = []
@@ -560,14 +563,14 @@ class FileReader:
         """Look at the bytes of the document (well-formed, line ends normalized)
         whose pieces come next, for what liblensfun surely accepts."""
         if self.screen and self.judge:
-            self._shaped_until = liblensfun.shaped_until(data)
+            self._shaped_until = self._liblensfun.shaped_until(data)
 
     def root(self, element: etree._Element, line: int) -> None:
         """Judge the document's root element, whose start tag ends on ``line``
         (liblensfun reads it before any piece)."""
         if not self.judge:
             return
-        found = liblensfun.root_refusal(element, line)
+        found = self._liblensfun.root_refusal(element, line)
         self._root_refusal = (*found, 0) if found is not None else None
 
     def first_refusal(self) -> tuple[int, str, int] | None:
@@ -584,19 +587,19 @@ class FileReader:
         if tag == "camera":
             camera = read_camera(piece, line_of)
             self.cameras.append(camera)
-            accepted = self.judge and liblensfun.camera_accepted(*camera[1:4], camera[5])
+            accepted = self.judge and self._liblensfun.camera_accepted(*camera[1:4], camera[5])
         elif tag == "mount":
             names = mount_names(piece, line_of)
             self.mount_names += names
-            accepted = self.judge and liblensfun.mount_accepted([name for _, name in names])
+            accepted = self.judge and self._liblensfun.mount_accepted([name for _, name in names])
         lenses, found = elements_in_context(piece, self.tags, first_lens, line_of)
         self.lenses += lenses
         if self.judge and self.refusal is None:
             if tag == "lens":  # its own row comes first
                 row = lenses[0]
-                accepted = liblensfun.lens_accepted(row[2], row[3], row[_LENS_CONTENT])
+                accepted = self._liblensfun.lens_accepted(row[2], row[3], row[_LENS_CONTENT])
             if not accepted or line_of(piece) >= self._shaped_until:
-                refusal = liblensfun.piece_refusal(piece, line_of)
+                refusal = self._liblensfun.piece_refusal(piece, line_of)
                 if refusal is not None:  # liblensfun holds the lenses of the pieces before
                     self.refusal = (*refusal, first_lens)
         rows = {VIGNETTING: self.vignetting, TCA: self.tca}
