@@ -50,11 +50,6 @@ class Known:
         self._lenses: dict[tuple, list[tuple[ParsedSource, int]]] | None = None
         self._contents: dict[int, list[tuple]] = {}
 
-    @classmethod
-    def of(cls, read: Sequence[ParsedSource]) -> Known:
-        """What the files of a baseline that parsed hold."""
-        return cls(read)
-
     def has_entry(self, name: tuple, content: tuple) -> bool:
         """Whether the baseline has a distortion entry of this content for a
         lens of this name (:func:`~.matching.lens_identity`)."""
