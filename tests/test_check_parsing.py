@@ -255,3 +255,58 @@ def test_scan_and_check_count_the_same_entries_of_any_mutated_file(bundled_db, t
     checked, _ = check(folder).files
     assert scanned["entries"] - bool(scanned["error"]) == checked.entries
     assert scanned["error"] == checked.error
+
+
+def _changed_copy(bundled_db: Path, target: Path) -> Path:
+    """The bundled database with one distortion entry of one file made to fold."""
+    target.mkdir()
+    for path in sorted(bundled_db.glob("*.xml")):
+        (target / path.name).write_bytes(path.read_bytes())
+    tokina = target / "slr-tokina.xml"
+    data = tokina.read_bytes()
+    start = data.index(b"<distortion")
+    end = data.index(b"/>", start)
+    focal = re.search(rb'focal="([^"]*)"', data[start:end]).group(1)
+    # poly3, k1 = -0.5: D(r) = r (1.5 - 0.5 r^2) peaks at r = 1, inside any image
+    folding = b'<distortion model="poly3" focal="' + focal + b'" k1="-0.5"'
+    tokina.write_bytes(data[:start] + folding + data[end:])
+    return target
+
+
+def test_a_baseline_file_with_the_same_bytes_is_not_parsed_again(
+    bundled_db: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import lensaudit.read as reader
+
+    changed = _changed_copy(bundled_db, tmp_path / "db")
+    parsed_names: list[list[str]] = []
+    read_contents = reader.read_contents
+
+    def spy(contents, *args, **kwargs):
+        parsed_names.append([Path(name).name for _, name, _ in contents])
+        return read_contents(contents, *args, **kwargs)
+
+    monkeypatch.setattr(reader, "read_contents", spy)
+    check(changed, baseline=bundled_db)
+    assert len(parsed_names) == 2
+    assert len(parsed_names[0]) == len(list(bundled_db.glob("*.xml")))
+    assert parsed_names[1] == ["slr-tokina.xml"]  # the only file whose bytes differ
+
+
+def test_a_baseline_read_from_the_database_tables_checks_as_one_parsed_anew(
+    bundled_db: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import lensaudit.check as checking
+
+    changed = _changed_copy(bundled_db, tmp_path / "db")
+    shared = check(changed, baseline=bundled_db)
+    parse_sources = checking.parse_sources
+    monkeypatch.setattr(
+        checking,
+        "parse_sources",
+        lambda sources, cache=None, parsed=(): parse_sources(sources, cache),
+    )
+    anew = check(changed, baseline=bundled_db)
+    assert shared.findings == anew.findings
+    assert shared.resolved == anew.resolved
+    assert [f.code for f in shared.findings if not f.known]  # the change is found

@@ -249,7 +249,8 @@ def _check(
         files, current = analyse_parsed(read, margin, verbose, cache)
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])
     label = os.fspath(baseline)
-    before_read = parse_sources(baseline_sources(label, source.paths), cache)
+    # A baseline file with the same bytes as one of the database is not parsed again.
+    before_read = parse_sources(baseline_sources(label, source.paths), cache, read)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
     # What the baseline holds places each duplicate on the one of its two the change added.
     own: dict[bytes, list] = {}  # what each file makes alone, by its bytes' digest

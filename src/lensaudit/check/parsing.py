@@ -140,25 +140,40 @@ def file_finding(tables: FileTables, display: str) -> Finding | None:
 
 
 def parse_sources(
-    sources: Sequence[Source], cache: reader.Cache | None = None
+    sources: Sequence[Source],
+    cache: reader.Cache | None = None,
+    parsed: Sequence[ParsedSource] = (),
 ) -> list[ParsedSource]:
     """Every source read by :func:`lensaudit.read.read_contents`, on every core
     where that pays, with its vignetting and TCA rows; with a ``cache``,
     contents it has met are not parsed again. A source without data (it
-    could not be read) is a file of status ``unreadable``."""
-    readable = [(s.data, s.display, s.path) for s in sources if s.data is not None]
+    could not be read) is a file of status ``unreadable``. A source with the
+    same bytes as one of ``parsed`` (files read before in this run, as a
+    baseline shares most of its files with the database) takes its tables:
+    the reader's tables are made of the bytes alone."""
+    same = {file.digest: file.tables for file in parsed if file.digest}
+    digests = [content_digest(s.data) if same and s.data is not None else b"" for s in sources]
+    readable = [
+        (s.data, s.display, s.path)
+        for s, digest in zip(sources, digests, strict=True)
+        if s.data is not None and digest not in same
+    ]
     tables = iter(reader.read_contents(readable, cache, calibrations=True, refusals=True))
     del readable  # the bytes of files on disk are not kept once read (see below)
-    parsed = []
-    for source in sources:
-        digest = b""
+    found_parsed = []
+    for source, digest in zip(sources, digests, strict=True):
         if source.data is None:
             found = reader.unreadable(source.display, source.path, source.error)
         else:
-            found = next(tables)
+            if digest in same:
+                found = same[digest].named(source.display, source.path)
+            else:
+                found = next(tables)
             # The reader's, where a cache made it take one.
-            digest = found.digest or content_digest(source.data)
+            digest = digest or found.digest or content_digest(source.data)
             if source.origin is None:  # only a git baseline's bytes are looked at again
                 source = replace(source, data=b"")
-        parsed.append(ParsedSource(source, found, file_finding(found, source.display), digest))
-    return parsed
+        found_parsed.append(
+            ParsedSource(source, found, file_finding(found, source.display), digest)
+        )
+    return found_parsed

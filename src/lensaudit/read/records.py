@@ -215,6 +215,15 @@ class FileTables:
         each tca row), as the cache keeps them."""
         self.vignetting, self.tca, self.lens_of_vignetting, self.lens_of_tca = values
 
+    def named(self, name: str, path: object) -> FileTables:
+        """These tables for another file of the same bytes, shown as ``name``
+        at ``path``: what they hold is shared, as it is made of the bytes alone."""
+        tables = object.__new__(FileTables)
+        for slot in FileTables.__slots__:
+            setattr(tables, slot, getattr(self, slot))
+        tables.name, tables.path = name, path
+        return tables
+
     @property
     def elements(self) -> int:
         """The number of ``<distortion>`` elements found (the file's own row aside)."""
