@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from .. import calibrations, pipeline, tca, vignetting
 from ..metrics import is_circular_fisheye
-from ..read import Cache
+from ..read import Cache, parallel
 from ..read.records import (
     STATUS_BAD_VALUE,
     STATUS_MISSING_ATTRIBUTE,
@@ -168,15 +168,63 @@ def _file_findings(
     cache: Cache | None,
     known: Known | None,
 ) -> list[list[Identified]]:
-    """:func:`file_findings` of files, every one worked out."""
+    """:func:`file_findings` of files, every one worked out: the metrics of
+    their entries here (where the cache is), then the rules on every core
+    where that pays, each core a share of the files (what a file makes alone
+    does not depend on the others; see :func:`lensaudit.read.parallel.map_sized`)."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
         return found  # numpy and the audits are not needed
-    entries = [(index, entry) for index in parsed for entry in read[index].entries]
-    metrics, corners = _metrics(
-        [read[index] for index in parsed], [entry for _, entry in entries], cache
-    )
+    files = [read[index] for index in parsed]
+    metrics, corners = _metrics(files, [entry for file in files for entry in file.entries], cache)
+    solved: dict[int, tuple[list, list]] = {}
+    start = 0
+    for index, file in zip(parsed, files, strict=True):
+        end = start + len(file.entries)
+        solved[index] = (metrics[start:end], corners[start:end])
+        start = end
+
+    def batch_findings(batch: list[int]) -> list[list[tuple]]:
+        """The findings of the files of ``batch`` (indices into ``read``), as plain data."""
+        made = _rules([read[i] for i in batch], [solved[i] for i in batch], margin, verbose, known)
+        return [[_plain(item) for item in items] for items in made]
+
+    sizes = [read[index].size for index in parsed]
+    batches = [[parsed[p] for p in share] for share in parallel.shares(sizes, parallel.cpus())]
+    batch_sizes = [sum(read[index].size for index in batch) for batch in batches]
+    for batch, made in zip(
+        batches, parallel.map_sized(batch_findings, batches, batch_sizes), strict=True
+    ):
+        for index, items in zip(batch, made, strict=True):
+            found[index] = [_identified(item) for item in items]
+    return found
+
+
+def _plain(item: Identified) -> tuple:
+    """A finding as plain data (what a process sends back; see :func:`_identified`)."""
+    return (tuple(vars(item.finding).values()), item.keys, item.names)
+
+
+def _identified(plain: tuple) -> Identified:
+    """The finding :func:`_plain` made plain data of."""
+    fields, keys, names = plain
+    return Identified(Finding(*fields), keys, names)
+
+
+def _rules(
+    read: Sequence[ParsedSource],
+    solved: Sequence[tuple[list[_EntryMetrics | None], list[float]]],
+    margin: float,
+    verbose: bool,
+    known: Known | None,
+) -> list[list[Identified]]:
+    """The findings each of ``read`` (files that parsed) makes alone, given the
+    metrics and r_corner of each one's entries (``solved``)."""
+    found: list[list[Identified]] = [[] for _ in read]
+    entries = [(index, entry) for index, file in enumerate(read) for entry in file.entries]
+    metrics = [m for file_metrics, _ in solved for m in file_metrics]
+    corners = [c for _, file_corners in solved for c in file_corners]
     inversions = inversion_findings([entry for _, entry in entries])
     for position, (index, entry) in enumerate(entries):
         if entry.status != STATUS_OK:

@@ -77,13 +77,14 @@ class ParsedSource:
     out, so that they hold one item per ``<distortion>`` element found, as
     :attr:`count` counts them (for a file that is not well-formed, those
     libxml2's recovery mode still finds). ``digest`` is the digest of its
-    bytes (b"" for a file that could not be read).
+    bytes (b"" for a file that could not be read), ``size`` their number.
     """
 
     source: Source
     tables: FileTables
     problem: Finding | None = None
     digest: bytes = b""
+    size: int = 0
 
     @property
     def count(self) -> int:
@@ -171,9 +172,10 @@ def parse_sources(
                 found = next(tables)
             # The reader's, where a cache made it take one.
             digest = digest or found.digest or content_digest(source.data)
-            if source.origin is None:  # only a git baseline's bytes are looked at again
-                source = replace(source, data=b"")
+        size = len(source.data) if source.data is not None else 0
+        if source.data is not None and source.origin is None:
+            source = replace(source, data=b"")  # only a git baseline's bytes are looked at again
         found_parsed.append(
-            ParsedSource(source, found, file_finding(found, source.display), digest)
+            ParsedSource(source, found, file_finding(found, source.display), digest, size)
         )
     return found_parsed
