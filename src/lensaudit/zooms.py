@@ -399,17 +399,42 @@ def between_all(
     return found
 
 
+@dataclass(frozen=True)
+class _Spline:
+    """The intervals between a lens's neighbouring calibrated focal lengths (in
+    the order liblensfun meets them), see
+    :func:`lensaudit.interpolation.interval_terms`: each one's (low, high)
+    focal lengths (``bounds``) and those at t = 0 and t = 1 (``ends``, one
+    row each); term n of the spline adds ``cubics[n]`` times calibration
+    ``rows[n]`` to the cubic of interval ``which[n]``."""
+
+    bounds: tuple[tuple[float, float], ...]
+    ends: np.ndarray
+    which: np.ndarray
+    rows: np.ndarray
+    cubics: np.ndarray
+
+
 @functools.lru_cache(maxsize=4096)
-def _spline_intervals(focals: tuple[float, ...]) -> tuple[tuple, ...]:
-    """The intervals between neighbouring calibrated ``focals`` (in the order
-    liblensfun meets them): (low, high, start, end, terms), see
-    :func:`lensaudit.interpolation.interval_terms`; a function of the focal
-    lengths alone, so one lens's calibrations share it with the same lens in
-    a baseline."""
+def _spline_intervals(focals: tuple[float, ...]) -> _Spline:
+    """The :class:`_Spline` of a lens's calibrated ``focals``: a function of the
+    focal lengths alone, so one lens's calibrations share it with the same
+    lens in a baseline (its arrays are read only)."""
     from .interpolation import interval_terms
 
-    return tuple((low, high, start, end, tuple(terms))
-                 for low, high, start, end, terms in interval_terms(focals))  # fmt: skip
+    intervals = interval_terms(focals)
+    terms = [(n, k, g) for n, (*_, found) in enumerate(intervals) for k, g in found]
+    ends = [(focals[start], focals[end]) for _, _, start, end, _ in intervals]
+    spline = _Spline(
+        tuple((low, high) for low, high, *_ in intervals),
+        np.array(ends, dtype=np.float64).reshape(-1, 2),
+        np.array([n for n, _, _ in terms], dtype=np.intp),
+        np.array([k for _, k, _ in terms], dtype=np.intp),
+        np.array([g for _, _, g in terms], dtype=np.float64).reshape(-1, 4),
+    )
+    for array in (spline.ends, spline.which, spline.rows, spline.cubics):
+        array.flags.writeable = False
+    return spline
 
 
 class _Intervals:
@@ -424,41 +449,46 @@ class _Intervals:
         threshold: float,
     ) -> None:
         self.threshold = threshold
-        owner, bounds, models, ends, radius = [], [], [], [], []
-        scaled: list[np.ndarray] = []  # each set's coefficients times its focal lengths
-        which, rows, cubics = [], [], []  # Q of interval which[n] += cubics[n] x scaled row
-        first_row = 0
+        owner: list[int] = []
+        bounds: list[tuple[float, float]] = []
+        models: list[str] = []
+        radius: list[float] = []
+        scaled: list[list[float]] = []  # each calibration's coefficients times its focal length
+        ends, which, rows, cubics = [], [], [], []  # see _Spline
         for index, (found, table) in enumerate(zip(sets, coefficients, strict=True)):
-            table = np.asarray(table, dtype=np.float64).reshape(len(found.focals), -1)
-            padded = np.zeros((len(table), _MOST_TERMS))
-            padded[:, : table.shape[1]] = table * np.asarray(found.focals)[:, None]
-            scaled.append(padded)
-            for low, high, start, end, terms in _spline_intervals(tuple(found.focals)):
-                for k, g in terms:
-                    which.append(len(owner))
-                    rows.append(first_row + k)
-                    cubics.append(g)
-                owner.append(index)
-                bounds.append((low, high))
-                models.append(found.model)
-                ends.append((found.focals[start], found.focals[end]))
-                radius.append(found.image_radius)
-            first_row += len(table)
+            spline = _spline_intervals(tuple(found.focals))
+            count = len(spline.bounds)
+            which.append(spline.which + len(owner))
+            rows.append(spline.rows + len(scaled))
+            cubics.append(spline.cubics)
+            ends.append(spline.ends)
+            owner += [index] * count
+            bounds += spline.bounds
+            models += [found.model] * count
+            radius += [found.image_radius] * count
+            padding = [0.0] * (_MOST_TERMS - len(MODEL_COEFFICIENTS[found.model]))
+            scaled += [
+                [value * focal for value in row] + padding
+                for row, focal in zip(table, found.focals, strict=True)
+            ]
         q = np.zeros((len(owner), _MOST_TERMS, 4))
-        if which:
-            all_rows = np.concatenate(scaled)[np.asarray(rows)]
-            np.add.at(q, np.asarray(which), all_rows[:, :, None] * np.asarray(cubics)[:, None, :])
-        self.owner, self.bounds, self.models = owner, bounds, models
+        if owner:
+            all_rows = np.asarray(scaled, dtype=np.float64)[np.concatenate(rows)]
+            np.add.at(
+                q, np.concatenate(which), all_rows[:, :, None] * np.concatenate(cubics)[:, None, :]
+            )
+        self.owner, self.bounds = owner, bounds
+        self.models = np.asarray(models, dtype=str)
         self.q = q
-        ends_array = np.asarray(ends, dtype=np.float64).reshape(len(owner), 2)
+        ends_array = np.concatenate(ends) if ends else np.zeros((0, 2))
         self.f0, self.f1 = ends_array[:, 0], ends_array[:, 1]
         self.image_radius = np.asarray(radius, dtype=np.float64)
         padded = {}
         for model in set(models):
-            rows = np.zeros((_MOST_TERMS, 6))
+            matrix = np.zeros((_MOST_TERMS, 6))
             own = refit.term_matrix(model)
-            rows[: len(own)] = own
-            padded[model] = rows
+            matrix[: len(own)] = own
+            padded[model] = matrix
         self.terms = np.asarray([padded[m] for m in models]).reshape(len(owner), _MOST_TERMS, 6)
         self.slopes = self.terms[:, :, 1:] * np.arange(1, 6)
 
@@ -466,6 +496,7 @@ class _Intervals:
         """Every interval's verdict: boxes of focal lengths, halved round by round."""
         count = len(self.owner)
         verdicts: list[Between | None] = [None] * count
+        decided = np.zeros(count, dtype=bool)  # whether verdicts[i] is not None
         box = np.arange(count)  # the interval each box belongs to
         t_low, t_high = np.zeros(count), np.ones(count)
         for depth in range(_MAX_DEPTH + 1):
@@ -474,7 +505,7 @@ class _Intervals:
             middle = (t_low + t_high) / 2
             focal = self.f0[box] + middle * (self.f1[box] - self.f0[box])
             rows = _horner(self.q[box], middle[:, None]) / focal[:, None]
-            r_max, d_max = _extrema([self.models[i] for i in box], rows)
+            r_max, d_max = _extrema(self.models[box], rows)
             with np.errstate(all="ignore"):
                 value = d_max / self.image_radius[box]
             folds = value < self.threshold
@@ -486,7 +517,8 @@ class _Intervals:
                     verdicts[interval] = Between(
                         low, high, FOLDS, float(focal[position]), float(value[position])
                     )
-            live = np.array([verdicts[i] is None for i in box], dtype=bool)
+            decided[box[folds]] = True
+            live = ~decided[box]
             # Bounds that overflow are not finite, and prove nothing: the box is halved.
             with np.errstate(all="ignore"):
                 reach = self.threshold * self.image_radius[box]
@@ -503,6 +535,7 @@ class _Intervals:
                         verdicts[interval] = Between(
                             low, high, UNDECIDED, float(focal[position]), float(value[position])
                         )
+                decided[box[last]] = True
                 if depth == _MAX_DEPTH:
                     break
                 left &= ~crowded[box]

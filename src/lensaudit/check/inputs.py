@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 from .. import git as gitlayer
@@ -52,7 +53,7 @@ class Source:
     error: str = ""
     origin: GitOrigin | None = None
 
-    @property
+    @cached_property
     def file_name(self) -> str:
         """The name without directories: what matches a file across revisions."""
         return Path(self.name).name

@@ -8,6 +8,7 @@ model, compared without case or white space) and its own values.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Hashable, Sequence
 from dataclasses import fields, replace
@@ -65,16 +66,20 @@ def calibration_content(entry: object) -> tuple:
     """A vignetting or TCA record's own values, without its lens's name, file
     or line (NaN as None, line numbers left out of the message)."""
     values = []
-    for item in fields(entry):  # type: ignore[arg-type]
-        if item.name in _CALIBRATION_SKIPPED:
-            continue
-        value = getattr(entry, item.name)
-        if item.name == "message":
+    for name in _content_fields(type(entry)):
+        value = getattr(entry, name)
+        if name == "message":
             value = _LINE_NUMBER.sub("line", value)
         elif isinstance(value, float):
             value = none_if_nan(value)
         values.append(value)
     return tuple(values)
+
+
+@functools.cache
+def _content_fields(record_type: type) -> tuple[str, ...]:
+    """The fields of a record type that :func:`calibration_content` keeps."""
+    return tuple(f.name for f in fields(record_type) if f.name not in _CALIBRATION_SKIPPED)
 
 
 def file_identified(file: ParsedSource) -> Identified:
