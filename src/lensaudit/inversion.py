@@ -50,6 +50,10 @@ FRAME_PIXELS = (6000, 4000)
 SAMPLES = 4096
 #: Consecutive samples judged together by :func:`_proven_bands`.
 BAND = 64
+#: Rows whose bands are sampled in one batch of arrays (a few MB of them).
+_ROWS_AT_ONCE = 256
+#: Samples iterated in one batch of arrays.
+_SAMPLES_AT_ONCE = 32768
 
 #: What liblensfun does at a radius where the inversion fails.
 OUTCOME_NONE = 0
@@ -353,7 +357,21 @@ def _sample_bands(
     outcome: NDArray[np.int8],
 ) -> None:
     """Iterate the samples of the bands of ``rows`` that :func:`_proven` cannot
-    clear; write the first failing radius (focal units) and its outcome."""
+    clear; write the first failing radius (focal units) and its outcome.
+    Rows are taken :data:`_ROWS_AT_ONCE` at a time (each row's samples are its
+    own), so that the arrays of a large database stay small."""
+    for start in range(0, rows.size, _ROWS_AT_ONCE):
+        _sample_row_bands(model, rows[start : start + _ROWS_AT_ONCE], corner, r_fail, outcome)
+
+
+def _sample_row_bands(
+    model: LiblensfunModel,
+    rows: NDArray[np.intp],
+    corner: FloatArray,
+    r_fail: FloatArray,
+    outcome: NDArray[np.int8],
+) -> None:
+    """:func:`_sample_bands` of some rows, at once."""
     bands = SAMPLES // BAND
     first = np.arange(bands) * BAND
     step = corner[rows, None] / SAMPLES
@@ -368,12 +386,20 @@ def _sample_bands(
     index = first[open_bands, None] + np.arange(1, BAND + 1)
     rd = _f32(index * step[open_rows])
     entry = np.repeat(rows[open_rows], BAND)
-    found = newton_outcome(model, entry, rd.ravel())
+    radii = rd.ravel()
+    found = np.concatenate(
+        [
+            newton_outcome(
+                model, entry[at : at + _SAMPLES_AT_ONCE], radii[at : at + _SAMPLES_AT_ONCE]
+            )
+            for at in range(0, entry.size, _SAMPLES_AT_ONCE)
+        ]
+    )
     failing = found > 0
     if not failing.any():
         return
     # The smallest failing radius of each entry: radii grow along each entry's samples.
-    entry, radius, what = entry[failing], rd.ravel()[failing], found[failing]
+    entry, radius, what = entry[failing], radii[failing], found[failing]
     order = np.lexsort((radius, entry))
     entry, radius, what = entry[order], radius[order], what[order]
     head = np.ones(entry.size, dtype=bool)
