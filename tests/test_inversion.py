@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from lensaudit import inversion, pipeline
@@ -245,8 +245,25 @@ def models(draw):
     return _synthetic(model, values, focal)
 
 
+def _residual_is_rounding(entry: DistortionEntry) -> bool:
+    """Whether liblensfun's poly3 residual, which mod-coord.cpp divides by k1,
+    rounds by more than its tolerance (NEWTON_EPS) inside the image: for a
+    k1 so small, the terms of the residual near the corner reach beyond
+    NEWTON_EPS / 2^-53, so whether a radius converges depends on the last
+    bits of that radius, pixel by pixel, and only whether some radius fails
+    can be compared, not which one fails first."""
+    if entry.model != "poly3":
+        return False
+    column = {n: [getattr(entry, n)] for n in inversion.MODEL_FIELDS}
+    model = inversion.liblensfun_model(*column.values())
+    k1 = abs(float(model.terms[0, 0]))
+    corner = float(image_radius([entry.aspect_ratio], [False])[0] / model.scale[0])
+    return k1 > 0 and corner / k1 * 2.0**-53 > inversion.NEWTON_EPS / 8
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(models())
+@example(_synthetic("poly3", (2.220446049250313e-16,), 4.0))
 def test_synthetic_models_fail_where_liblensfun_fails(entry):
     found = _kernel([entry])
     chosen = _with_real_focal([entry])
@@ -254,6 +271,9 @@ def test_synthetic_models_fail_where_liblensfun_fails(entry):
     radius_px, [mask] = _liblensfun_row(chosen, frame)
     if mask is None:
         assert not found.fails[0]
+        return
+    if _residual_is_rounding(entry):
+        assert found.fails[0] == mask.any()
         return
     if found.fails[0]:
         named = found.fraction[0] * math.hypot(*frame) / 2
