@@ -8,7 +8,7 @@ import click
 
 from ..commands import cycle_collector_off
 from ..read import LoadError
-from ..report import ReportExistsError, audit, write_report
+from ..report import ReportExistsError, audit, drawing, write_report
 from .options import cache_option, database_paths, fail, refuse_writing_inputs
 
 
@@ -66,7 +66,8 @@ def report(
             values = load_values()
         except PaperValuesError as error:
             fail(str(error))
-    with cycle_collector_off():
+    # Figure 5's process (where one is forked) imports matplotlib while this one reads.
+    with cycle_collector_off(), drawing.started() as figure5:
         try:
             # Read once, with the calibrations: every table and figure comes from this read.
             audits = audit(list(paths) or None, cache=cache)
@@ -76,7 +77,9 @@ def report(
         if files and all(f.error for f in files):
             fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
         try:
-            written = write_report(audits, output_dir, force=force, paper_values=values)
+            written = write_report(
+                audits, output_dir, force=force, paper_values=values, drawing=figure5
+            )
         except ReportExistsError as error:
             fail(str(error))
         except OSError as error:

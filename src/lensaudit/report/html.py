@@ -13,6 +13,7 @@ import base64
 import hashlib
 import json
 import math
+import re
 from html import escape
 from typing import TYPE_CHECKING, Any
 
@@ -397,6 +398,26 @@ def _comparison(comparison: Comparison) -> str:
 
 def _options(values: list[str]) -> str:
     return "".join(f'<option value="{escape(v)}">{escape(v)}</option>' for v in values)
+
+
+def inline_svg(svg: str, prefix: str) -> str:
+    """An SVG document (as :func:`lensaudit.report.figures.svg_text` gives it) as
+    an ``<svg>`` element for embedding in HTML.
+
+    The XML prolog and namespace declarations are dropped (HTML parsers know
+    SVG) and every id is prefixed, so that several figures in one page cannot
+    share an id.
+    """
+    text = svg[svg.index("<svg") :]
+    text = re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text, count=2)
+    ids = set(re.findall(r'\sid="([^"]+)"', text))
+
+    def rename(match: re.Match[str]) -> str:
+        name = match.group(2)
+        return f"{match.group(1)}{prefix}-{name}" if name in ids else match.group(0)
+
+    text = re.sub(r'(\sid="|#)([\w.\-]+)', rename, text)
+    return text.strip()
 
 
 def render(
