@@ -144,23 +144,23 @@ def write_report(
         for name, text in _data_files(audits, facts, table1, table2, fig5).items():
             outputs.write_text(directory / name, text)
             written.append(directory / name)
+        # The page around Figure 5 is made while the figure is drawn.
+        before, after = html.render_around_figure5(
+            audit,
+            facts,
+            fig5,
+            table1,
+            table2,
+            comparison,
+            calibrations.section(audits.vignetting, audits.tca),
+        )
         png_bytes, svg = drawing.result()
         png = directory / "fig5_r_normalized.png"
         outputs.write_bytes(png, png_bytes)
         # Drawn once as SVG: the same text is the .svg file and the page's figure.
         outputs.write_text(directory / "fig5_r_normalized.svg", svg)
         written += [png, directory / "fig5_r_normalized.svg"]
-        page = html.render(
-            audit,
-            facts,
-            fig5,
-            html.inline_svg(svg, "fig5"),
-            table1,
-            table2,
-            comparison,
-            calibrations.section(audits.vignetting, audits.tca),
-        )
-        outputs.write_text(directory / "report.html", page)
+        outputs.write_text(directory / "report.html", before + html.inline_svg(svg, "fig5") + after)
         written.append(directory / "report.html")
         if comparison is not None:
             from . import paper  # numpy: `report --help` (this package) imports no heavy module
