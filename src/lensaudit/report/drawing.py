@@ -14,6 +14,7 @@ error then shows itself.
 
 from __future__ import annotations
 
+import io
 import os
 import pickle
 import threading
@@ -35,8 +36,6 @@ _LENGTH_BYTES = 8
 
 def draw(histogram: Histogram) -> tuple[bytes, str]:
     """Figure 5 of ``histogram``: the PNG file's bytes and the SVG file's text."""
-    import io
-
     from . import figures  # matplotlib: only where Figure 5 is drawn
 
     figure = figures.figure5(histogram)
