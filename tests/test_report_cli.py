@@ -191,8 +191,11 @@ def test_default_is_the_bundled_database(runner, tmp_path):
 # Runs the command line in a fresh interpreter and prints, last, which heavy
 # modules it imported.
 IMPORTS_SCRIPT = """
-import json, sys
+import json, os, sys
 from lensaudit.cli import main
+from lensaudit.read import parallel
+if "CPUS" in os.environ:  # as if this many CPUs were free
+    parallel.cpus = lambda: int(os.environ["CPUS"])
 try:
     main(sys.argv[1:], prog_name="lensaudit")
 except SystemExit:
@@ -201,8 +204,10 @@ print(json.dumps(sorted(m for m in ("matplotlib", "pandas") if m in sys.modules)
 """
 
 
-def heavy_imports(arguments, tmp_path):
+def heavy_imports(arguments, tmp_path, cpus=None):
     environment = {"LENSAUDIT_CACHE_DIR": str(tmp_path / "cache")}
+    if cpus is not None:
+        environment["CPUS"] = str(cpus)
     result = subprocess.run(
         [sys.executable, "-c", IMPORTS_SCRIPT, *arguments],
         capture_output=True,
@@ -223,6 +228,18 @@ def test_commands_that_draw_nothing_do_not_import_matplotlib(arguments, small_db
     assert heavy_imports(arguments, tmp_path) == []
 
 
-def test_a_report_imports_matplotlib_to_draw_figure5_and_not_pandas(small_db, tmp_path):
+@pytest.mark.parametrize(
+    "cpus, imported",
+    [
+        (1, ["matplotlib"]),
+        pytest.param(2, [], marks=pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork")),
+    ],
+)
+def test_a_report_imports_matplotlib_where_figure5_is_drawn_and_not_pandas(
+    small_db, tmp_path, cpus, imported
+):
+    """With a CPU to spare, Figure 5 is drawn (matplotlib imported) in a forked
+    process (lensaudit.report.drawing), not in the command's."""
     arguments = ["report", str(small_db), "-o", str(tmp_path / "out")]
-    assert heavy_imports(arguments, tmp_path) == ["matplotlib"]
+    assert heavy_imports(arguments, tmp_path, cpus) == imported
+    assert (tmp_path / "out" / "fig5_r_normalized.svg").read_text().count("<svg") == 1

@@ -81,3 +81,20 @@ def test_fresh_processes_with_other_hash_seeds_and_caches_write_the_same_bytes(t
         assert result.returncode == 0, result.stderr[-2000:]
         outputs.append({name: (out / name).read_bytes() for name in REPORT_FILES})
     assert outputs[0] == outputs[1] == outputs[2]
+
+
+def test_the_command_writes_what_the_library_writes(bundled_db, two_reports, tmp_path):
+    """The command draws Figure 5 in a process of its own where it can
+    (lensaudit.report.drawing), write_report here: the same bytes."""
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "report", str(bundled_db), "-o", str(out)],
+        env={**os.environ, "SOURCE_DATE_EPOCH": EPOCHS[0]},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    for name in REPORT_FILES:
+        assert (out / name).read_bytes() == (two_reports[0] / name).read_bytes(), name

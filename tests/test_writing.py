@@ -146,7 +146,7 @@ def test_a_report_that_fails_half_way_writes_nothing(capsys, db, tmp_path, monke
     def broken(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(html, "render", broken)
+    monkeypatch.setattr(html, "render_around_figure5", broken)
     out = tmp_path / "report"
     code, err = run(capsys, "report", db, "-o", out)
     assert code == 2 and "No space left on device" in err

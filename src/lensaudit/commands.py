@@ -176,11 +176,7 @@ def scan(arguments: ScanArguments) -> None:
     if arguments.cache_dir is not None:
         use_cache_dir(arguments.cache_dir)
     single_blas_thread()
-    collecting = gc.isenabled()
-    # What the scan allocates lives until it ends: the cycle collector would
-    # only walk it over and over (a tenth of importing numpy, for one).
-    gc.disable()
-    try:
+    with cycle_collector_off():
         if arguments.kind != "distortion":
             _scan_calibrations(paths, arguments, output)
             return
@@ -191,8 +187,27 @@ def scan(arguments: ScanArguments) -> None:
         _fail_if_none_read(result.files)
         with output_stream(output) as stream:
             writer(arguments.output_format)(result, stream)
+
+
+@contextmanager
+def cycle_collector_off() -> Iterator[None]:
+    """The block runs without Python's cycle collector (as it was after it).
+
+    What a command allocates lives until it ends: the collector would only
+    walk it over and over (a tenth of importing numpy, for one). What the
+    block allocated is handed to the oldest generation unwalked, where a
+    full collection finds it: re-enabled as it is, the collector would walk
+    all of it at the next allocation (a tenth of a cold report).
+    """
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        yield
     finally:
         if collecting:
+            if not gc.get_freeze_count():  # nobody else's frozen objects to thaw
+                gc.freeze()
+                gc.unfreeze()
             gc.enable()
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import math
 import os
 from pathlib import Path
@@ -12,6 +11,7 @@ import click
 
 from ..check_formats import writer
 from ..columns import FOLD_MARGIN
+from ..commands import cycle_collector_off
 from ..git import GitError, GitUnavailable, top_level
 from ..read import LoadError
 from .options import (
@@ -146,17 +146,10 @@ def check(
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
     baselines = [baseline] if baseline is not None and os.path.exists(baseline) else []
     refuse_writing_inputs([output], paths, *baselines)
-    collecting = gc.isenabled()
-    # What the check allocates lives until it ends: the cycle collector would
-    # only walk it over and over.
-    gc.disable()
-    try:
+    with cycle_collector_off():
         result = _run(paths, baseline, margin, verbose, output_format, cache)
         with output_stream(output) as stream:
             writer(output_format)(result, stream)
-    finally:
-        if collecting:
-            gc.enable()
     if result.failed:
         raise SystemExit(EXIT_FINDINGS)
 

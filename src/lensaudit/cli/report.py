@@ -6,8 +6,9 @@ from pathlib import Path
 
 import click
 
+from ..commands import cycle_collector_off
 from ..read import LoadError
-from ..report import ReportExistsError, audit, write_report
+from ..report import ReportExistsError, audit, drawing, write_report
 from .options import cache_option, database_paths, fail, refuse_writing_inputs
 
 
@@ -65,20 +66,24 @@ def report(
             values = load_values()
         except PaperValuesError as error:
             fail(str(error))
-    try:
-        # Read once, with the calibrations: every table and figure comes from this read.
-        audits = audit(list(paths) or None, cache=cache)
-    except LoadError as error:
-        fail(str(error))
-    files = audits.distortion.files
-    if files and all(f.error for f in files):
-        fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
-    try:
-        written = write_report(audits, output_dir, force=force, paper_values=values)
-    except ReportExistsError as error:
-        fail(str(error))
-    except OSError as error:
-        fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
+    # Figure 5's process (where one is forked) imports matplotlib while this one reads.
+    with cycle_collector_off(), drawing.started() as figure5:
+        try:
+            # Read once, with the calibrations: every table and figure comes from this read.
+            audits = audit(list(paths) or None, cache=cache)
+        except LoadError as error:
+            fail(str(error))
+        files = audits.distortion.files
+        if files and all(f.error for f in files):
+            fail("no file could be read: " + "; ".join(f"{f.name}: {f.error}" for f in files))
+        try:
+            written = write_report(
+                audits, output_dir, force=force, paper_values=values, drawing=figure5
+            )
+        except ReportExistsError as error:
+            fail(str(error))
+        except OSError as error:
+            fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
     summary = audits.distortion.summary
     click.echo(f"lensaudit report: {audits.distortion.source.label}")
     click.echo(

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 import math
-import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -67,26 +66,6 @@ def svg_text(figure: Figure) -> str:
     buffer = io.StringIO()
     save(figure, buffer, "svg")
     return buffer.getvalue()
-
-
-def inline_svg(figure: Figure | str, prefix: str) -> str:
-    """The figure (or its :func:`svg_text`) as an ``<svg>`` element for embedding in HTML.
-
-    The XML prolog and namespace declarations are dropped (HTML parsers know
-    SVG) and every id is prefixed, so that several figures in one page cannot
-    share an id.
-    """
-    text = figure if isinstance(figure, str) else svg_text(figure)
-    text = text[text.index("<svg") :]
-    text = re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text, count=2)
-    ids = set(re.findall(r'\sid="([^"]+)"', text))
-
-    def rename(match: re.Match[str]) -> str:
-        name = match.group(2)
-        return f"{match.group(1)}{prefix}-{name}" if name in ids else match.group(0)
-
-    text = re.sub(r'(\sid="|#)([\w.\-]+)', rename, text)
-    return text.strip()
 
 
 #: Below 1 the model folds inside its image; those bars and their counts are red.

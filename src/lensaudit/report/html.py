@@ -13,6 +13,7 @@ import base64
 import hashlib
 import json
 import math
+import re
 from html import escape
 from typing import TYPE_CHECKING, Any
 
@@ -399,6 +400,26 @@ def _options(values: list[str]) -> str:
     return "".join(f'<option value="{escape(v)}">{escape(v)}</option>' for v in values)
 
 
+def inline_svg(svg: str, prefix: str) -> str:
+    """An SVG document (as :func:`lensaudit.report.figures.svg_text` gives it) as
+    an ``<svg>`` element for embedding in HTML.
+
+    The XML prolog and namespace declarations are dropped (HTML parsers know
+    SVG) and every id is prefixed, so that several figures in one page cannot
+    share an id.
+    """
+    text = svg[svg.index("<svg") :]
+    text = re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text, count=2)
+    ids = set(re.findall(r'\sid="([^"]+)"', text))
+
+    def rename(match: re.Match[str]) -> str:
+        name = match.group(2)
+        return f"{match.group(1)}{prefix}-{name}" if name in ids else match.group(0)
+
+    text = re.sub(r'(\sid="|#)([\w.\-]+)', rename, text)
+    return text.strip()
+
+
 def render(
     audit: Audit,
     provenance: Provenance,
@@ -409,8 +430,26 @@ def render(
     comparison: Comparison | None = None,
     calibrations_html: str = "",
 ) -> str:
-    """The whole page as a string; ``calibrations_html`` is the vignetting and TCA
-    section (see :mod:`lensaudit.report.calibrations`), placed after the folds."""
+    """The whole page as a string; ``figure5_svg`` is Figure 5 as :func:`inline_svg`
+    gives it, ``calibrations_html`` the vignetting and TCA section (see
+    :mod:`lensaudit.report.calibrations`), placed after the folds."""
+    before, after = render_around_figure5(
+        audit, provenance, histogram, table1, table2, comparison, calibrations_html
+    )
+    return before + figure5_svg + after
+
+
+def render_around_figure5(
+    audit: Audit,
+    provenance: Provenance,
+    histogram: Histogram,
+    table1: list[tuple[Any, ...]],
+    table2: list[tuple[Any, ...]],
+    comparison: Comparison | None = None,
+    calibrations_html: str = "",
+) -> tuple[str, str]:
+    """The page of :func:`render` before and after Figure 5's ``<svg>``, so that
+    the page is made while the figure is drawn."""
     summary = audit.summary
     rows = entry_rows(audit)
     data = script_json({"columns": [list(c) for c in ENTRY_COLUMNS], "rows": rows})
@@ -421,7 +460,7 @@ def render(
             + _comparison(comparison)
             + "</section>"
         )
-    return f"""<!DOCTYPE html>
+    before = f"""<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
@@ -446,7 +485,8 @@ r_normalized = D(r_max) / corner (or circle) &lt; 1.</p>
 {_table(TABLE2_CAPTION, TABLE2_HEADER, table2, "table2")}
 </section>
 <section id="figure5"><h2>Figure 5: r_normalized</h2>
-<div class="figure">{figure5_svg}</div>
+<div class="figure">"""
+    after = f"""</div>
 <p class="note">Finite r_normalized of the {histogram.entries} rectilinear entries with a finite
 r_max. Left: D(r_max) over the image corner, both in Hugin units ({histogram.below_one} below 1).
 Right: the paper's Eq. 29, which divides by a corner in focal-length units
@@ -466,6 +506,7 @@ the model folds inside the image when its peak stays below the corner.</p>
 </body>
 </html>
 """
+    return before, after
 
 
 def _content_security_policy() -> str:

@@ -24,6 +24,7 @@ from . import calibrations, provenance, tables
 if TYPE_CHECKING:
     from ..pipeline import Audit
     from .audits import ReportAudits
+    from .drawing import Figure5Drawing
     from .histogram import Histogram
     from .provenance import Provenance
 
@@ -102,6 +103,7 @@ def write_report(
     directory: str | os.PathLike[str],
     force: bool = False,
     paper_values: dict[str, Any] | None = None,
+    drawing: Figure5Drawing | None = None,
 ) -> list[Path]:
     """Write the report of a database's ``audits`` (see
     :func:`lensaudit.report.audit`) into ``directory`` (created if needed).
@@ -109,10 +111,13 @@ def write_report(
     Raises :class:`ReportExistsError` when a report file is already there and
     ``force`` is false; ``OSError`` when the directory cannot be written.
     With ``paper_values`` (see :func:`lensaudit.report.paper.load_values`)
-    the paper comparison is added. Returns the paths written.
+    the paper comparison is added. Figure 5 is drawn by ``drawing`` (see
+    :mod:`lensaudit.report.drawing`; here without it). Returns the paths written.
     """
-    # numpy, matplotlib: `report --help` (this package) imports no heavy module
-    from . import figures, histogram, html
+    # numpy: `report --help` (this package) imports no heavy module; matplotlib
+    # is imported where Figure 5 is drawn (report.drawing)
+    from . import histogram, html
+    from .drawing import Figure5Drawing
 
     audit = audits.distortion
     directory = Path(directory)
@@ -122,6 +127,9 @@ def write_report(
     table1 = tables.table1_rows(audit.summary)
     table2 = tables.table2_rows(audit.summary)
     fig5 = histogram.figure5(audit)
+    if drawing is None:
+        drawing = Figure5Drawing()
+    drawing.draw(fig5)
     comparison = None
     if paper_values is not None:
         from . import paper  # numpy: `report --help` (this package) imports no heavy module
@@ -136,24 +144,23 @@ def write_report(
         for name, text in _data_files(audits, facts, table1, table2, fig5).items():
             outputs.write_text(directory / name, text)
             written.append(directory / name)
-        figure = figures.figure5(fig5)
-        png = directory / "fig5_r_normalized.png"
-        figures.save(figure, outputs.path(png), "png")
-        # Drawn once as SVG: the same text is the .svg file and the page's figure.
-        svg = figures.svg_text(figure)
-        outputs.write_text(directory / "fig5_r_normalized.svg", svg)
-        written += [png, directory / "fig5_r_normalized.svg"]
-        page = html.render(
+        # The page around Figure 5 is made while the figure is drawn.
+        before, after = html.render_around_figure5(
             audit,
             facts,
             fig5,
-            figures.inline_svg(svg, "fig5"),
             table1,
             table2,
             comparison,
             calibrations.section(audits.vignetting, audits.tca),
         )
-        outputs.write_text(directory / "report.html", page)
+        png_bytes, svg = drawing.result()
+        png = directory / "fig5_r_normalized.png"
+        outputs.write_bytes(png, png_bytes)
+        # Drawn once as SVG: the same text is the .svg file and the page's figure.
+        outputs.write_text(directory / "fig5_r_normalized.svg", svg)
+        written += [png, directory / "fig5_r_normalized.svg"]
+        outputs.write_text(directory / "report.html", before + html.inline_svg(svg, "fig5") + after)
         written.append(directory / "report.html")
         if comparison is not None:
             from . import paper  # numpy: `report --help` (this package) imports no heavy module
