@@ -254,13 +254,13 @@ def _read_versions(
     audits.update((blob, kept[blob]) for blob in reused)
     if progress is not None:
         progress(len(audits), len(every_blob))
-    summaries = versions.read_versions(
+    audits |= versions.read_versions(
         git,
         [blob for blob in every_blob if blob not in audits],
         names,
+        interner,
         None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
     )
-    audits.update((blob, interner.audit(summary)) for blob, summary in summaries.items())
     audits = {blob: audits[blob] for blob in every_blob}
     if index is not None:
         keep_audits(index, interner, audits)

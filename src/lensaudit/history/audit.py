@@ -4,10 +4,13 @@ interned, and summed per revision."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from .commits import Commit
 from .results import COUNT_COLUMNS, Revision
-from .versions import Summary
+
+if TYPE_CHECKING:
+    from .versions import Summary
 
 
 @dataclass(frozen=True)
