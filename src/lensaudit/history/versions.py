@@ -35,8 +35,10 @@ from .audit import BlobAudit, Interner
 from .commits import Git, HistoryError
 from .results import MODELS
 
-#: A round of versions read between two reports of progress holds about this many bytes.
-ROUND_BYTES = 128 << 20
+#: A round of versions read between two reports of progress holds about this many
+#: bytes. Each round costs a fork and a ``git cat-file`` per process (whose delta
+#: caches start cold): the whole Lensfun history (420 MB) is read in one.
+ROUND_BYTES = 512 << 20
 
 _FIELD = {name: index for index, name in enumerate(ROW_FIELDS)}
 _MAKER, _LENS, _TYPE, _CROP, _MODEL, _FOCAL, _STATUS = (
