@@ -249,7 +249,7 @@ def _read_versions(
     interner = Interner()
     kept = audits_kept(index, interner)
     full = _read_in_full(git, sorted(set(newest_files.values())), names, store)
-    audits = {blob: interner.audit(versions.summarize(*found)) for blob, found in full.items()}
+    audits = {blob: interner.audit(*versions.summarize(*found)) for blob, found in full.items()}
     reused = [blob for blob in every_blob if blob in kept and blob not in full]
     audits.update((blob, kept[blob]) for blob in reused)
     if progress is not None:
