@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import io
 import sys
 from pathlib import Path
@@ -100,25 +101,33 @@ def history(
         fail(f"cannot create {output_dir}: {error.strerror or error}")
     # --cache-dir has named the directory by now, as $LENSAUDIT_CACHE_DIR does.
     bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
+    collecting = gc.isenabled()
+    # What the history allocates (the summary of every file version) lives
+    # until it ends: the cycle collector would only walk it over and over.
+    gc.disable()
     try:
-        result = audit_history(
-            repository,
-            db_path,
-            revision=revision,
-            since=since,
-            until=until,
-            first_parent=first_parent,
-            cache=cache,
-            progress=bar.update,
-        )
-    except HistoryError as error:
+        try:
+            result = audit_history(
+                repository,
+                db_path,
+                revision=revision,
+                since=since,
+                until=until,
+                first_parent=first_parent,
+                cache=cache,
+                progress=bar.update,
+            )
+        except HistoryError as error:
+            bar.close()
+            fail(str(error))
         bar.close()
-        fail(str(error))
-    bar.close()
-    for warning in result.warnings:
-        click.echo(f"lensaudit: warning: {warning}", err=True)
+        for warning in result.warnings:
+            click.echo(f"lensaudit: warning: {warning}", err=True)
 
-    written = _write_outputs(result, output_dir, cache)
+        written = _write_outputs(result, output_dir, cache)
+    finally:
+        if collecting:
+            gc.enable()
     if not quiet:
         _print_summary(result, written)
 

@@ -249,18 +249,18 @@ def _read_versions(
     interner = Interner()
     kept = audits_kept(index, interner)
     full = _read_in_full(git, sorted(set(newest_files.values())), names, store)
-    audits = {blob: interner.audit(versions.summarize(*found)) for blob, found in full.items()}
+    audits = {blob: interner.audit(*versions.summarize(*found)) for blob, found in full.items()}
     reused = [blob for blob in every_blob if blob in kept and blob not in full]
     audits.update((blob, kept[blob]) for blob in reused)
     if progress is not None:
         progress(len(audits), len(every_blob))
-    summaries = versions.read_versions(
+    audits |= versions.read_versions(
         git,
         [blob for blob in every_blob if blob not in audits],
         names,
+        interner,
         None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
     )
-    audits.update((blob, interner.audit(summary)) for blob, summary in summaries.items())
     audits = {blob: audits[blob] for blob in every_blob}
     if index is not None:
         keep_audits(index, interner, audits)

@@ -3,11 +3,11 @@ interned, and summed per revision."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .commits import Commit
 from .results import COUNT_COLUMNS, Revision
-from .versions import Summary
 
 
 @dataclass(frozen=True)
@@ -35,12 +35,17 @@ class Interner:
             self.values.append(value)
         return found
 
-    def audit(self, summary: Summary) -> BlobAudit:
-        """A file version's summary, its identities interned."""
-        idents = tuple(map(self, summary.identities))
-        return BlobAudit(
-            summary.error, summary.counts, idents, tuple(idents[i] for i in summary.folding)
-        )
+    def audit(
+        self,
+        error: str,
+        counts: tuple[int, ...],
+        identities: Sequence[tuple],
+        folding: Sequence[int] = (),
+    ) -> BlobAudit:
+        """A file version's summary (the fields of a :class:`~.versions.Summary`),
+        its identities interned."""
+        idents = tuple(map(self, identities))
+        return BlobAudit(error, counts, idents, tuple(idents[i] for i in folding))
 
 
 def revision(

@@ -4,9 +4,19 @@ parse stage, in whichever process parses each)."""
 
 from __future__ import annotations
 
+import functools
+import re
 from pathlib import PurePosixPath
 
 from .commits import Git
+
+
+@functools.cache
+def _tree_entries(oid_size: int) -> re.Pattern[bytes]:
+    """The entries of a raw git tree object: mode, name, object id (``oid_size``
+    bytes). Each entry starts where the one before it ends, so that the
+    pattern's matches, one after another, are the entries."""
+    return re.compile(rb"([0-7]+) ([^\0]*)\0(.{%d})" % oid_size, re.DOTALL)
 
 
 def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
@@ -14,17 +24,11 @@ def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
 
     Subdirectories, symbolic links and submodules are not database files.
     """
-    files = {}
-    position, end = 0, len(data)
-    while position < end:
-        space = data.index(b" ", position)
-        nul = data.index(b"\0", space)
-        start = nul + 1
-        mode, name = data[position:space], data[space + 1 : nul]
-        position = start + oid_size
-        if mode.startswith(b"100") and name.lower().endswith(b".xml"):
-            files[name.decode("utf-8", "surrogateescape")] = data[start:position].hex()
-    return files
+    return {
+        name.decode("utf-8", "surrogateescape"): oid.hex()
+        for mode, name, oid in _tree_entries(oid_size).findall(data)
+        if mode.startswith(b"100") and name.lower().endswith(b".xml")
+    }
 
 
 def file_maps(

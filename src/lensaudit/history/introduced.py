@@ -75,9 +75,11 @@ def _next_state(
     parents: list[_State],
     audits: dict[str, BlobAudit],
     calibration: list[int],
+    met: set[int],
 ) -> _State:
     """The file states of commit ``index``, given those of its parents
-    (``calibration``: the calibration identity of each entry identity)."""
+    (``calibration``: the calibration identity of each entry identity;
+    ``met``: every identity of the states made so far, which this adds to)."""
     first = parents[0] if parents else {}
     state: _State = {}
     for path, blob in files.items():
@@ -100,7 +102,8 @@ def _next_state(
         introducers = []
         for ident in audit.idents:
             found = known.get(ident)
-            if found is None:
+            # An identity no state has held is in no parent: not searched for.
+            if found is None and ident in met:
                 found = _find_introducer(ident, path, parents)
             if found is None and previous is not None:
                 if removed is None:
@@ -108,6 +111,7 @@ def _next_state(
                 found = removed.get(calibration[ident])
             introducers.append(index if found is None else found)
         state[path] = _FileState(blob, audit.idents, tuple(introducers))
+        met.update(audit.idents)
     return state
 
 
@@ -156,6 +160,7 @@ def walk(
         }
         for p in outside
     }
+    met = {ident for state in states.values() for file in state.values() for ident in file.idents}
     revisions = []
     for index, commit in enumerate(commits):
         parent_hashes = parents_of(commit, first_parent)
@@ -164,7 +169,7 @@ def walk(
             states[commit.hash] = states[parent_hashes[0]]
             continue
         parent_states = [states[p] for p in parent_hashes]
-        states[commit.hash] = _next_state(index, mine, parent_states, audits, calibration)
+        states[commit.hash] = _next_state(index, mine, parent_states, audits, calibration, met)
         revisions.append(revision(commit, commit.hash in mainline, mine, audits))
     return states, revisions
 

@@ -11,7 +11,9 @@ summaries, not the tables, are kept, in the history's index
 Versions are read on every core by the reader's own mechanism
 (:func:`lensaudit.read.parallel.map_sized`), in rounds so that progress can
 be shown: each process reads its share of a round from git itself (one
-``git cat-file`` each) and sends back only summaries. Nearly every lens and
+``git cat-file`` each) and sends back only summaries, each identity once
+with a number the summaries refer to (this process interns the identities
+of a share, not of every entry of every version). Nearly every lens and
 entry of a version is one of an earlier version: the reader's
 :class:`lensaudit.read.Pieces` and the solver's memo
 (:func:`lensaudit.solver.kernel.column_metrics`) skip what was met before,
@@ -29,11 +31,14 @@ from .. import read
 from ..pipeline import file_metrics
 from ..read import parallel
 from ..read.records import MODEL_COEFFICIENTS, ROW_FIELDS, STATUS_OK, DistortionEntry
+from .audit import BlobAudit, Interner
 from .commits import Git, HistoryError
 from .results import MODELS
 
-#: A round of versions read between two reports of progress holds about this many bytes.
-ROUND_BYTES = 128 << 20
+#: A round of versions read between two reports of progress holds about this many
+#: bytes. Each round costs a fork and a ``git cat-file`` per process (whose delta
+#: caches start cold): the whole Lensfun history (420 MB) is read in one.
+ROUND_BYTES = 512 << 20
 
 _FIELD = {name: index for index, name in enumerate(ROW_FIELDS)}
 _MAKER, _LENS, _TYPE, _CROP, _MODEL, _FOCAL, _STATUS = (
@@ -125,12 +130,13 @@ def read_versions(
     git: Git,
     blobs: Sequence[str],
     names: dict[str, str],
+    interner: Interner,
     progress: Callable[[int], None] | None = None,
-) -> dict[str, Summary]:
-    """The summaries of file versions (``blobs``, shown as ``names``), read on
-    every core. ``progress(done)`` is called after each round with the
-    number read so far. Raises :class:`~.commits.HistoryError` when git
-    cannot give a version."""
+) -> dict[str, BlobAudit]:
+    """The audits of file versions (``blobs``, shown as ``names``), read on
+    every core, their identities interned by ``interner``. ``progress(done)``
+    is called after each round with the number read so far. Raises
+    :class:`~.commits.HistoryError` when git cannot give a version."""
     sizes = []
     for blob, size in zip(blobs, git.object_sizes(blobs), strict=True):
         if size is None:
@@ -140,15 +146,18 @@ def read_versions(
     # first share of each round learns (read here) is known to the next round's.
     pieces, solved = read.Pieces(), {}
     read_batch = partial(_read_batch, git, names, pieces, solved)
-    found: dict[str, Summary] = {}
+    found: dict[str, BlobAudit] = {}
     for round_blobs, round_sizes in _rounds(blobs, sizes):
         shares = parallel.shares(round_sizes, parallel.cpus())
         batches = [[round_blobs[index] for index in share] for share in shares]
         batch_sizes = [sum(round_sizes[index] for index in share) for share in shares]
-        for batch, summaries in zip(
+        for batch, (identities, summaries) in zip(
             batches, parallel.map_sized(read_batch, batches, batch_sizes), strict=True
         ):
-            found.update(zip(batch, map(Summary._make, summaries), strict=True))
+            numbers = list(map(interner, identities))
+            for blob, (error, counts, local, folding) in zip(batch, summaries, strict=True):
+                idents = tuple(map(numbers.__getitem__, local))
+                found[blob] = BlobAudit(error, counts, idents, tuple(idents[i] for i in folding))
         if progress is not None:
             progress(len(found))
     return found
@@ -174,16 +183,18 @@ def _read_batch(
     pieces: read.Pieces,
     solved: dict[tuple, tuple],
     batch: list[str],
-) -> list:
-    """The summaries of one process's share of a round, as plain data.
-    ``pieces`` and ``solved`` are the reader's and the solver's memos."""
-    known: dict[tuple, tuple] = {}  # each identity once: marshalled once, then referred to
+) -> tuple[list[tuple], list]:
+    """The summaries of one process's share of a round, as plain data: the
+    identities met, each once, and the summaries, their identities given
+    as positions in that list. ``pieces`` and ``solved`` are the reader's
+    and the solver's memos."""
+    known: dict[tuple, int] = {}  # identity -> its position among those met
     summaries = []
     for blob, answer in zip(batch, git.objects(batch), strict=True):
         if answer is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
         error, counts, identities, folding = summarize(tables, file_metrics(tables, None, solved))
-        identities = [known.setdefault(identity, identity) for identity in identities]
-        summaries.append((error, counts, identities, folding))
-    return summaries
+        numbers = [known.setdefault(identity, len(known)) for identity in identities]
+        summaries.append((error, counts, numbers, folding))
+    return list(known), summaries
