@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import gc
 import io
 import sys
 from pathlib import Path
 
 import click
 
-from ..commands import refuse_writing_inputs
+from ..commands import cycle_collector_off, refuse_writing_inputs
 from ..history import HistoryError, audit_history, trend_figure
 from ..history.index import caches, key_of
 from ..read.paths import enclosing_database
@@ -101,11 +100,8 @@ def history(
         fail(f"cannot create {output_dir}: {error.strerror or error}")
     # --cache-dir has named the directory by now, as $LENSAUDIT_CACHE_DIR does.
     bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
-    collecting = gc.isenabled()
-    # What the history allocates (the summary of every file version) lives
-    # until it ends: the cycle collector would only walk it over and over.
-    gc.disable()
-    try:
+    # What the history allocates (the summary of every file version) lives until it ends.
+    with cycle_collector_off():
         try:
             result = audit_history(
                 repository,
@@ -125,9 +121,6 @@ def history(
             click.echo(f"lensaudit: warning: {warning}", err=True)
 
         written = _write_outputs(result, output_dir, cache)
-    finally:
-        if collecting:
-            gc.enable()
     if not quiet:
         _print_summary(result, written)
 
