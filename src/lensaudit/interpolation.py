@@ -30,7 +30,8 @@ import math
 from collections.abc import Sequence
 
 #: The cubic Hermite basis, coefficients of 1, t, t^2, t^3: h00, h10, h01, h11.
-_H00, _H10, _H01, _H11 = (1, 0, -3, 2), (0, 1, -2, 1), (0, 0, 3, -2), (0, 0, -1, 1)
+HERMITE_BASIS = ((1, 0, -3, 2), (0, 1, -2, 1), (0, 0, 3, -2), (0, 0, -1, 1))
+_H00, _H10, _H01, _H11 = HERMITE_BASIS
 
 
 def spline_terms(
@@ -68,13 +69,23 @@ def interval_terms(
     """:func:`spline_terms` of every interval between neighbouring distinct
     calibrated ``focals`` at once: (low, high, the calibration above, the
     one below, [(index, g)]), in ascending order."""
+    return [
+        (low, high, slots[1], slots[2], _hermite(slots))  # type: ignore[misc]
+        for low, high, slots in interval_slots(focals)
+    ]
+
+
+def interval_slots(focals: Sequence[float]) -> list[tuple[float, float, list[int | None]]]:
+    """Every interval between neighbouring distinct calibrated ``focals``, in
+    ascending order: (low, high, liblensfun's four spline slots), the slots
+    being the indices of the second calibration above, the calibration
+    above, the one below and the second below (None where there is none),
+    whose Hermite spline :data:`HERMITE_BASIS` weighs as :func:`spline_terms` says."""
     distinct, first, second = _calibrated(tuple(focals))
-    found = []
-    for position in range(1, len(distinct)):
-        slots = _slots(distinct, first, second, position)
-        found.append((distinct[position - 1], distinct[position], slots[1], slots[2],
-                      _hermite(slots)))  # fmt: skip
-    return found
+    return [
+        (distinct[position - 1], distinct[position], _slots(distinct, first, second, position))
+        for position in range(1, len(distinct))
+    ]
 
 
 def _slots(

@@ -399,42 +399,39 @@ def between_all(
     return found
 
 
-@dataclass(frozen=True)
-class _Spline:
-    """The intervals between a lens's neighbouring calibrated focal lengths (in
-    the order liblensfun meets them), see
-    :func:`lensaudit.interpolation.interval_terms`: each one's (low, high)
-    focal lengths (``bounds``) and those at t = 0 and t = 1 (``ends``, one
-    row each); term n of the spline adds ``cubics[n]`` times calibration
-    ``rows[n]`` to the cubic of interval ``which[n]``."""
-
-    bounds: tuple[tuple[float, float], ...]
-    ends: np.ndarray
-    which: np.ndarray
-    rows: np.ndarray
-    cubics: np.ndarray
-
-
 @functools.lru_cache(maxsize=4096)
-def _spline_intervals(focals: tuple[float, ...]) -> _Spline:
-    """The :class:`_Spline` of a lens's calibrated ``focals``: a function of the
-    focal lengths alone, so one lens's calibrations share it with the same
-    lens in a baseline (its arrays are read only)."""
-    from .interpolation import interval_terms
+def _interval_slots(focals: tuple[float, ...]) -> tuple[tuple[float, float, tuple[int, ...]], ...]:
+    """:func:`lensaudit.interpolation.interval_slots` of a lens's calibrated
+    ``focals``, -1 for a slot without a calibration: a function of the focal
+    lengths alone, so one lens's calibrations share it with the same lens in
+    a baseline."""
+    from .interpolation import interval_slots
 
-    intervals = interval_terms(focals)
-    terms = [(n, k, g) for n, (*_, found) in enumerate(intervals) for k, g in found]
-    ends = [(focals[start], focals[end]) for _, _, start, end, _ in intervals]
-    spline = _Spline(
-        tuple((low, high) for low, high, *_ in intervals),
-        np.array(ends, dtype=np.float64).reshape(-1, 2),
-        np.array([n for n, _, _ in terms], dtype=np.intp),
-        np.array([k for _, k, _ in terms], dtype=np.intp),
-        np.array([g for _, _, g in terms], dtype=np.float64).reshape(-1, 4),
+    return tuple(
+        (low, high, tuple(-1 if slot is None else slot for slot in slots))
+        for low, high, slots in interval_slots(focals)
     )
-    for array in (spline.ends, spline.which, spline.rows, spline.cubics):
-        array.flags.writeable = False
-    return spline
+
+
+def _hermite_weights(no_second_above: np.ndarray, no_second_below: np.ndarray) -> np.ndarray:
+    """The cubic g (coefficients of 1, t, t^2, t^3) by which each of an
+    interval's four spline slots (second above, above, below, second below)
+    weighs its calibration, given which intervals lack the outer slots: the
+    spline of :func:`lensaudit.interpolation.spline_terms`, whose tangents
+    are half the difference of the neighbours either side, or that of the
+    two ends where a neighbour is missing. Sums of halves of small integers:
+    exact, as the terms of ``interval_terms`` are."""
+    from .interpolation import HERMITE_BASIS
+
+    h00, h10, h01, h11 = (np.array(h, dtype=np.float64) for h in HERMITE_BASIS)
+    lone_above = no_second_above[:, None].astype(np.float64)
+    lone_below = no_second_below[:, None].astype(np.float64)
+    weights = np.empty((len(no_second_above), 4, 4))
+    weights[:, 0] = -0.5 * h10
+    weights[:, 1] = h00 - lone_above * h10 - (0.5 + 0.5 * lone_below) * h11
+    weights[:, 2] = h01 + (0.5 + 0.5 * lone_above) * h10 + lone_below * h11
+    weights[:, 3] = 0.5 * h11
+    return weights + 0.0  # no negative zeros
 
 
 class _Intervals:
@@ -454,16 +451,15 @@ class _Intervals:
         models: list[str] = []
         radius: list[float] = []
         scaled: list[list[float]] = []  # each calibration's coefficients times its focal length
-        ends, which, rows, cubics = [], [], [], []  # see _Spline
+        focals: list[float] = []  # each calibration's focal length
+        slots: list[tuple[int, ...]] = []  # each interval's spline slots, as rows of scaled
         for index, (found, table) in enumerate(zip(sets, coefficients, strict=True)):
-            spline = _spline_intervals(tuple(found.focals))
-            count = len(spline.bounds)
-            which.append(spline.which + len(owner))
-            rows.append(spline.rows + len(scaled))
-            cubics.append(spline.cubics)
-            ends.append(spline.ends)
+            first_row = len(scaled)
+            for low, high, own in _interval_slots(tuple(found.focals)):
+                bounds.append((low, high))
+                slots.append(tuple(slot + first_row if slot >= 0 else -1 for slot in own))
+            count = len(bounds) - len(owner)
             owner += [index] * count
-            bounds += spline.bounds
             models += [found.model] * count
             radius += [found.image_radius] * count
             padding = [0.0] * (_MOST_TERMS - len(MODEL_COEFFICIENTS[found.model]))
@@ -471,23 +467,30 @@ class _Intervals:
                 [value * focal for value in row] + padding
                 for row, focal in zip(table, found.focals, strict=True)
             ]
+            focals += found.focals
+        slot_rows = np.array(slots, dtype=np.intp).reshape(-1, 4)
+        present = slot_rows >= 0
+        weights = _hermite_weights(~present[:, 0], ~present[:, 3])
+        # The terms of interval_terms, in its order (by interval, then by
+        # calibration): the same numbers summed the same way.
+        which = np.broadcast_to(np.arange(len(slot_rows))[:, None], slot_rows.shape)[present]
+        rows, cubics = slot_rows[present], weights[present]
+        order = np.lexsort((rows, which))
         q = np.zeros((len(owner), _MOST_TERMS, 4))
         if owner:
-            all_rows = np.asarray(scaled, dtype=np.float64)[np.concatenate(rows)]
-            np.add.at(
-                q, np.concatenate(which), all_rows[:, :, None] * np.concatenate(cubics)[:, None, :]
-            )
+            all_rows = np.asarray(scaled, dtype=np.float64)[rows[order]]
+            np.add.at(q, which[order], all_rows[:, :, None] * cubics[order][:, None, :])
         self.owner, self.bounds = owner, bounds
         self.models = np.asarray(models, dtype=str)
         self.q = q
-        ends_array = np.concatenate(ends) if ends else np.zeros((0, 2))
-        self.f0, self.f1 = ends_array[:, 0], ends_array[:, 1]
+        focal_of_row = np.asarray(focals, dtype=np.float64)
+        self.f0, self.f1 = focal_of_row[slot_rows[:, 1]], focal_of_row[slot_rows[:, 2]]
         self.image_radius = np.asarray(radius, dtype=np.float64)
         padded = {}
         for model in set(models):
             matrix = np.zeros((_MOST_TERMS, 6))
-            own = refit.term_matrix(model)
-            matrix[: len(own)] = own
+            own_terms = refit.term_matrix(model)
+            matrix[: len(own_terms)] = own_terms
             padded[model] = matrix
         self.terms = np.asarray([padded[m] for m in models]).reshape(len(owner), _MOST_TERMS, 6)
         self.slopes = self.terms[:, :, 1:] * np.arange(1, 6)
