@@ -347,6 +347,8 @@ _ROUNDING = 1e-12
 #: Halvings of the search for the radius a box is checked to (any radius
 #: where the middle model is past the image serves; this finds one to ~1e-9).
 _RADIUS_HALVINGS = 30
+#: Boxes whose interval arithmetic is done in one batch of arrays.
+_BOXES_AT_ONCE = 1024
 _MOST_TERMS = 3  # coefficients of a model at most (ptlens); fewer are padded with zero terms
 CLEAR, FOLDS, UNDECIDED = "clear", "folds", "undecided"
 
@@ -551,6 +553,25 @@ class _Intervals:
         ]
 
     def _clear(
+        self,
+        box: np.ndarray,
+        t_low: np.ndarray,
+        t_high: np.ndarray,
+        radius: np.ndarray,
+        reach: np.ndarray,
+    ) -> np.ndarray:
+        """:meth:`_clear_boxes` of :data:`_BOXES_AT_ONCE` boxes at a time (each
+        box is judged alone; smaller arrays stay in the processor's cache)."""
+        if len(box) <= _BOXES_AT_ONCE:
+            return self._clear_boxes(box, t_low, t_high, radius, reach)
+        parts = (
+            slice(start, start + _BOXES_AT_ONCE) for start in range(0, len(box), _BOXES_AT_ONCE)
+        )
+        return np.concatenate(
+            [self._clear_boxes(box[p], t_low[p], t_high[p], radius[p], reach[p]) for p in parts]
+        )
+
+    def _clear_boxes(
         self,
         box: np.ndarray,
         t_low: np.ndarray,
