@@ -168,26 +168,30 @@ def _file_findings(
     cache: Cache | None,
     known: Known | None,
 ) -> list[list[Identified]]:
-    """:func:`file_findings` of files, every one worked out: the metrics of
-    their entries here (where the cache is), then the rules on every core
-    where that pays, each core a share of the files (what a file makes alone
-    does not depend on the others; see :func:`lensaudit.read.parallel.map_sized`)."""
+    """:func:`file_findings` of files, every one worked out: the rules on
+    every core where that pays, each core a share of the files (what a file
+    makes alone does not depend on the others; see
+    :func:`lensaudit.read.parallel.map_sized`). The metrics of the entries
+    are worked out with the rules, or first here with a ``cache``, which
+    this process keeps."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
         return found  # numpy and the audits are not needed
-    files = [read[index] for index in parsed]
-    metrics, corners = _metrics(files, [entry for file in files for entry in file.entries], cache)
-    solved: dict[int, tuple[list, list]] = {}
-    start = 0
-    for index, file in zip(parsed, files, strict=True):
-        end = start + len(file.entries)
-        solved[index] = (metrics[start:end], corners[start:end])
-        start = end
+    solved = None  # with a cache: index into read -> the metrics of its entries
+    if cache is not None:
+        solved = dict(zip(parsed, _solved([read[index] for index in parsed], cache), strict=True))
 
     def batch_findings(batch: list[int]) -> list[list[tuple]]:
         """The findings of the files of ``batch`` (indices into ``read``), as plain data."""
-        made = _rules([read[i] for i in batch], [solved[i] for i in batch], margin, verbose, known)
+        files = [read[i] for i in batch]
+        made = _rules(
+            files,
+            _solved(files, None) if solved is None else [solved[i] for i in batch],
+            margin,
+            verbose,
+            known,
+        )
         return [[_plain(item) for item in items] for items in made]
 
     sizes = [read[index].size for index in parsed]
@@ -199,6 +203,20 @@ def _file_findings(
         for index, items in zip(batch, made, strict=True):
             found[index] = [_identified(item) for item in items]
     return found
+
+
+def _solved(
+    files: list[ParsedSource], cache: Cache | None
+) -> list[tuple[list[_EntryMetrics | None], list[float]]]:
+    """The metrics and r_corner of each file's entries (see :func:`_metrics`)."""
+    metrics, corners = _metrics(files, [entry for file in files for entry in file.entries], cache)
+    solved = []
+    start = 0
+    for file in files:
+        end = start + len(file.entries)
+        solved.append((metrics[start:end], corners[start:end]))
+        start = end
+    return solved
 
 
 def _plain(item: Identified) -> tuple:
