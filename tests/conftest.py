@@ -154,3 +154,12 @@ def git_commit(repository: Path, files: dict[str, str], message: str, date: str 
         environment |= {"GIT_AUTHOR_DATE": date, "GIT_COMMITTER_DATE": date}
     for words in (["add", *files], ["commit", "-qm", message]):
         subprocess.run(["git", "-C", str(repository), *words], check=True, env=environment)
+
+
+def no_child_left() -> bool:
+    """Whether this process has no child process left (none running, none unreaped)."""
+    try:
+        os.waitpid(-1, os.WNOHANG)
+    except ChildProcessError:
+        return True
+    return False

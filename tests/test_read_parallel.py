@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from conftest import no_child_left
 from lensaudit import pipeline
 from lensaudit.read import parallel, read
 from lensaudit.read.parallel import map_sized, shares
@@ -30,14 +31,6 @@ def forced(monkeypatch):
 @pytest.fixture
 def one_cpu(monkeypatch):
     monkeypatch.setattr(parallel, "cpus", lambda: 1)
-
-
-def no_child_left() -> bool:
-    try:
-        os.waitpid(-1, os.WNOHANG)
-    except ChildProcessError:
-        return True
-    return False
 
 
 def test_results_are_the_serial_ones_in_order(forced):

@@ -9,6 +9,7 @@ import threading
 import numpy as np
 import pytest
 
+from conftest import no_child_left
 from lensaudit.read import parallel
 from lensaudit.report import drawing, histogram
 
@@ -22,14 +23,6 @@ def forked(monkeypatch):
     """A process for the drawing, as if two CPUs were free."""
     monkeypatch.setattr(parallel, "cpus", lambda: 2)
     assert threading.active_count() == 1, "another thread runs: nothing would be forked"
-
-
-def no_child_left() -> bool:
-    try:
-        os.waitpid(-1, os.WNOHANG)
-    except ChildProcessError:
-        return True
-    return False
 
 
 def drawn_by_pid(_: histogram.Histogram) -> tuple[bytes, str]:

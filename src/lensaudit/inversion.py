@@ -341,8 +341,9 @@ def inversion_failures(model: LiblensfunModel, r_corner: ArrayLike) -> Inversion
         # Samples are float32 radii; the bands cover them with room for that rounding.
         top = corner[candidates] * (1 + 2.0**-20)
         doubtful = candidates[~_proven(p, weight, np.zeros_like(top), top)]
-        if doubtful.size:
-            _sample_bands(model, doubtful, corner, r_fail, outcome)
+        # Each row's samples are its own: rows a few at a time keep the arrays small.
+        for start in range(0, doubtful.size, _ROWS_AT_ONCE):
+            _sample_bands(model, doubtful[start : start + _ROWS_AT_ONCE], corner, r_fail, outcome)
     with np.errstate(all="ignore"):
         r_fail_hugin = r_fail * model.scale
         fraction = r_fail_hugin / np.asarray(r_corner, dtype=np.float64)
@@ -357,21 +358,7 @@ def _sample_bands(
     outcome: NDArray[np.int8],
 ) -> None:
     """Iterate the samples of the bands of ``rows`` that :func:`_proven` cannot
-    clear; write the first failing radius (focal units) and its outcome.
-    Rows are taken :data:`_ROWS_AT_ONCE` at a time (each row's samples are its
-    own), so that the arrays of a large database stay small."""
-    for start in range(0, rows.size, _ROWS_AT_ONCE):
-        _sample_row_bands(model, rows[start : start + _ROWS_AT_ONCE], corner, r_fail, outcome)
-
-
-def _sample_row_bands(
-    model: LiblensfunModel,
-    rows: NDArray[np.intp],
-    corner: FloatArray,
-    r_fail: FloatArray,
-    outcome: NDArray[np.int8],
-) -> None:
-    """:func:`_sample_bands` of some rows, at once."""
+    clear; write the first failing radius (focal units) and its outcome."""
     bands = SAMPLES // BAND
     first = np.arange(bands) * BAND
     step = corner[rows, None] / SAMPLES

@@ -528,7 +528,12 @@ class _Intervals:
             with np.errstate(all="ignore"):
                 reach = self.threshold * self.image_radius[box]
                 radius = _radius_past(rows, self.terms[box], reach, value / self.threshold, r_max)
-                clear = live & self._clear(box, t_low, t_high, radius, reach)
+                # Each box is judged alone: a few at a time, the arrays stay in the cache.
+                starts = range(0, len(box), _BOXES_AT_ONCE)
+                parts = [slice(start, start + _BOXES_AT_ONCE) for start in starts]
+                clear = live & np.concatenate(
+                    [self._clear(box[p], t_low[p], t_high[p], radius[p], reach[p]) for p in parts]
+                )
             left = live & ~clear
             crowded = np.bincount(box[left], minlength=count) > _MAX_BOXES // 2
             if depth == _MAX_DEPTH or crowded.any():
@@ -553,25 +558,6 @@ class _Intervals:
         ]
 
     def _clear(
-        self,
-        box: np.ndarray,
-        t_low: np.ndarray,
-        t_high: np.ndarray,
-        radius: np.ndarray,
-        reach: np.ndarray,
-    ) -> np.ndarray:
-        """:meth:`_clear_boxes` of :data:`_BOXES_AT_ONCE` boxes at a time (each
-        box is judged alone; smaller arrays stay in the processor's cache)."""
-        if len(box) <= _BOXES_AT_ONCE:
-            return self._clear_boxes(box, t_low, t_high, radius, reach)
-        parts = (
-            slice(start, start + _BOXES_AT_ONCE) for start in range(0, len(box), _BOXES_AT_ONCE)
-        )
-        return np.concatenate(
-            [self._clear_boxes(box[p], t_low[p], t_high[p], radius[p], reach[p]) for p in parts]
-        )
-
-    def _clear_boxes(
         self,
         box: np.ndarray,
         t_low: np.ndarray,
