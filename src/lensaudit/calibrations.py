@@ -146,6 +146,10 @@ class CalibrationRecords(Sequence[Any]):
             rows += part._rows
         return cls(kind, names, rows)
 
+    def part(self, start: int, stop: int) -> CalibrationRecords:
+        """The records from ``start`` up to ``stop`` (not included)."""
+        return CalibrationRecords(self.kind, self._names[start:stop], self._rows[start:stop])
+
     def __len__(self) -> int:
         return len(self._rows)
 

@@ -15,6 +15,7 @@ import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from .. import calibrations, pipeline, tca, vignetting
 from ..metrics import is_circular_fisheye
@@ -62,6 +63,9 @@ from .result import (
     entry_key,
 )
 from .series import series_outliers
+
+#: Vignetting or TCA records audited in one batch of arrays.
+_RECORDS_AT_ONCE = 16384
 
 _STATUS_CODES = {
     STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
@@ -406,8 +410,6 @@ def calibration_findings(
     Their identity is content, as for distortion entries: the kind, the
     entry's own values, then its lens by name.
     """
-    import numpy as np  # numpy: only where arrays are needed, not on importing this module
-
     shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
     parsed = [(index, file) for index, file in enumerate(read) if file.problem is None]
     for kind, module in ((VIGNETTING, vignetting), (TCA, tca)):
@@ -418,32 +420,46 @@ def calibration_findings(
         owners = [
             index for index, file in parsed for _ in range(len(file.calibrations.get(kind, ())))
         ]
-        with np.errstate(all="ignore"):
-            audit = module.audit_entries(records)
-        severities = audit.metrics["severity"].tolist()
-        # Entry objects only for the records with a finding: a database has tens of thousands.
-        for position, status in enumerate(records.column("status")):
-            if status == STATUS_OK:
-                if severities[position] not in shown:
-                    continue
-            elif status not in calibrations.STATUS_CODES:
+        # Each record is audited alone: a part at a time, the audit's arrays stay small.
+        for start in range(0, len(records), _RECORDS_AT_ONCE):
+            part = records.part(start, start + _RECORDS_AT_ONCE)
+            for position, item in _calibration_findings(kind, module, part, shown):
+                index = owners[start + position]
+                yield index, item._replace(names=(read[index].source.file_name,))
+
+
+def _calibration_findings(
+    kind: str, module: Any, records: calibrations.CalibrationRecords, shown: set[str]
+) -> Iterable[tuple[int, Identified]]:
+    """(position in ``records``, finding) of each of the vignetting or TCA
+    audit's findings whose severity is ``shown``; its file names come later."""
+    import numpy as np  # numpy: only where arrays are needed, not on importing this module
+
+    with np.errstate(all="ignore"):
+        audit = module.audit_entries(records)
+    severities = audit.metrics["severity"].tolist()
+    # Entry objects only for the records with a finding: a database has tens of thousands.
+    for position, status in enumerate(records.column("status")):
+        if status == STATUS_OK:
+            if severities[position] not in shown:
                 continue
-            entry = records[position]
-            record = _calibration_record(audit, position)
-            for severity, code, _, _, message in module.findings([record]):
-                finding = Finding(
-                    severity,
-                    code,
-                    entry.file,
-                    entry.line,
-                    0,
-                    clip(message),
-                    clip_key(entry_key(entry)),  # the same fields as a distortion entry's
-                )
-                content = (severity, code, kind, calibration_content(entry))
-                keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
-                index = owners[position]
-                yield index, Identified(finding, keys, (read[index].source.file_name,))
+        elif status not in calibrations.STATUS_CODES:
+            continue
+        entry = records[position]
+        record = _calibration_record(audit, position)
+        for severity, code, _, _, message in module.findings([record]):
+            finding = Finding(
+                severity,
+                code,
+                entry.file,
+                entry.line,
+                0,
+                clip(message),
+                clip_key(entry_key(entry)),  # the same fields as a distortion entry's
+            )
+            content = (severity, code, kind, calibration_content(entry))
+            keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
+            yield position, Identified(finding, keys, ())
 
 
 def _calibration_record(audit: calibrations.CalibrationAudit, position: int) -> dict:
