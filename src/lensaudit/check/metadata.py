@@ -176,22 +176,28 @@ def conflicting_calibrations(file: ParsedSource) -> Iterable[Identified]:
     lens_of = {VIGNETTING: tables.lens_of_vignetting, TCA: tables.lens_of_tca}
     for kind, records in file.calibrations.items():
         # Keys from the columns; entry objects only for the repeats (a file has thousands).
-        first: dict[tuple, int] = {}
+        lenses = lens_of[kind] or []
+        # Each lens's first calibration of each crop factor and point, kept until
+        # its last row (a lens's rows come together: few are kept at once).
+        last = {lens: position for position, lens in enumerate(lenses)}
+        first: dict[int | None, dict[tuple, int]] = {}
         statuses = records.column("status")
         crops = records.column("crop_factor")
         names = ("focal", "aperture", "distance") if kind == VIGNETTING else ("focal",)
-        points = list(zip(*(records.column(name) for name in names), strict=True))
-        for position, lens in enumerate(lens_of[kind] or ()):
+        points = zip(*(records.column(name) for name in names), strict=True)
+        for position, (lens, point) in enumerate(zip(lenses, points, strict=False)):
             if lens is None or statuses[position] != STATUS_OK:
                 continue
-            earlier_position = first.setdefault((lens, crops[position], points[position]), position)
+            own = first.setdefault(lens, {})
+            earlier_position = own.setdefault((crops[position], point), position)
+            if last[lens] == position:
+                del first[lens]
             if earlier_position == position:
                 continue
             entry, earlier = records[position], records[earlier_position]
             if _coefficients(kind, entry) == _coefficients(kind, earlier):
                 continue
             content, first_content = calibration_content(entry), calibration_content(earlier)
-            point = points[position]
             yield _conflict(file, kind, entry, earlier.line, point, content, first_content)
 
 
