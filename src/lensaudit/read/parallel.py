@@ -1,4 +1,5 @@
-"""Parse files on every core: the reader's one speed mechanism.
+"""Work on every core: files parsed (the reader), a share of the files'
+rules (check), Figure 5 drawn beside the report (:mod:`lensaudit.report.drawing`).
 
 :func:`map_sized` applies a function to a list of items, split into one
 share per CPU by size (largest first, each to the lightest share). Where it
@@ -7,7 +8,8 @@ than one CPU is available and there is enough to do), each share but the
 first goes to a forked process, which sends its results back through a pipe
 as :mod:`marshal` data (so results must be plain data); the first is done
 here meanwhile. A share whose process fails is done here afterwards, where
-any error then shows itself.
+any error then shows itself. :func:`can_fork`, :func:`received` and
+:func:`stop` are the same rules and steps for a process forked otherwise.
 """
 
 from __future__ import annotations
@@ -47,15 +49,17 @@ def shares(sizes: Sequence[int], count: int) -> list[list[int]]:
     return [sorted(share) for share in found if share]
 
 
+def can_fork() -> bool:
+    """Whether a process may be forked to work beside this one: ``os.fork``
+    exists, more than one CPU is available, and this process runs one thread
+    (forking a threaded process can deadlock the child)."""
+    return hasattr(os, "fork") and cpus() > 1 and threading.active_count() == 1
+
+
 def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Sequence[int]) -> list:
     """``[function(item) for item in items]``, spread over the CPUs by ``sizes``."""
     count = min(cpus(), MAX_PROCESSES, len(items))
-    if (
-        count < 2
-        or sum(sizes) < MIN_BYTES
-        or not hasattr(os, "fork")
-        or threading.active_count() > 1  # forking a threaded process can deadlock the child
-    ):
+    if count < 2 or sum(sizes) < MIN_BYTES or not can_fork():
         return [function(item) for item in items]
     first, *others = shares(sizes, count)
     results: dict[int, Any] = {}
@@ -71,7 +75,7 @@ def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Seque
             children.pop(0)
     finally:
         for pid, output in children:  # after an error here: no child outlives it
-            _stop(pid, output)
+            stop(pid, output)
     return [results[i] if i in results else function(items[i]) for i in range(len(items))]
 
 
@@ -95,10 +99,8 @@ def _fork(function: Callable[[Any], Any], items: Sequence[Any], share: list[int]
 def _collect(pid: int, output: int) -> dict[int, Any]:
     """What a child sent: index -> result; empty if it failed. Closes ``output``
     and waits for the child."""
-    with open(output, "rb", closefd=True) as stream:
-        data = stream.read()
-    _, status = os.waitpid(pid, 0)
-    if status != 0:
+    data = received(pid, output)
+    if data is None:
         return {}
     try:
         return dict(marshal.loads(data))
@@ -106,10 +108,20 @@ def _collect(pid: int, output: int) -> dict[int, Any]:
         return {}
 
 
-def _stop(pid: int, output: int) -> None:
-    """End a child whose results are no longer wanted."""
+def received(pid: int, output: int) -> bytes | None:
+    """All that the forked process ``pid`` wrote to ``output``, once it has
+    ended; None if it failed. Closes ``output``."""
+    with open(output, "rb", closefd=True) as stream:
+        data = stream.read()
+    _, status = os.waitpid(pid, 0)
+    return data if status == 0 else None
+
+
+def stop(pid: int, *descriptors: int) -> None:
+    """End a forked process whose work is no longer wanted, closing ``descriptors``."""
     try:
-        os.close(output)
+        for descriptor in descriptors:
+            os.close(descriptor)
         os.kill(pid, 9)
         os.waitpid(pid, 0)
     except OSError:

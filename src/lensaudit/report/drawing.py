@@ -17,7 +17,6 @@ from __future__ import annotations
 import io
 import os
 import pickle
-import threading
 from contextlib import contextmanager
 
 from ..read import parallel
@@ -57,7 +56,7 @@ class Figure5Drawing:
     def start(cls) -> Figure5Drawing:
         """A drawing whose process (where one is forked) imports matplotlib now."""
         drawing = cls()
-        if hasattr(os, "fork") and parallel.cpus() > 1 and threading.active_count() == 1:
+        if parallel.can_fork():
             drawing._fork()
         return drawing
 
@@ -100,17 +99,14 @@ class Figure5Drawing:
 
     def stop(self) -> None:
         """End the process, if there is one still: its drawing is no longer wanted."""
-        for descriptor in (self._requests, self._replies):
-            if descriptor is not None:
-                os.close(descriptor)
+        descriptors = [d for d in (self._requests, self._replies) if d is not None]
         self._requests = self._replies = None
         if self._pid is not None:
-            try:
-                os.kill(self._pid, 9)
-                os.waitpid(self._pid, 0)
-            except OSError:
-                pass
+            parallel.stop(self._pid, *descriptors)
             self._pid = None
+        else:
+            for descriptor in descriptors:
+                os.close(descriptor)
 
 
 @contextmanager
@@ -126,10 +122,8 @@ def started() -> Iterator[Figure5Drawing]:
 def _collect(pid: int, replies: int) -> tuple[bytes, str] | None:
     """What the process ``pid`` sent through ``replies``, None if it failed;
     closes ``replies`` and waits for the process to end."""
-    with open(replies, "rb", closefd=True) as stream:
-        reply = stream.read()
-    _, status = os.waitpid(pid, 0)
-    if status != 0:
+    reply = parallel.received(pid, replies)
+    if reply is None:
         return None
     try:
         png, svg = pickle.loads(reply)
