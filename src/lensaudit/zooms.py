@@ -515,14 +515,8 @@ class _Intervals:
                 value = d_max / self.image_radius[box]
             folds = value < self.threshold
             # The witness of an interval that folds: its lowest focal length found folding.
-            for position in np.flatnonzero(folds)[np.argsort(focal[folds], kind="stable")]:
-                interval = int(box[position])
-                if verdicts[interval] is None:
-                    low, high = self.bounds[interval]
-                    verdicts[interval] = Between(
-                        low, high, FOLDS, float(focal[position]), float(value[position])
-                    )
-            decided[box[folds]] = True
+            witnesses = np.flatnonzero(folds)[np.argsort(focal[folds], kind="stable")]
+            self._decide(verdicts, decided, box, witnesses, FOLDS, focal, value)
             live = ~decided[box]
             # Bounds that overflow are not finite, and prove nothing: the box is halved.
             with np.errstate(all="ignore"):
@@ -538,14 +532,7 @@ class _Intervals:
             crowded = np.bincount(box[left], minlength=count) > _MAX_BOXES // 2
             if depth == _MAX_DEPTH or crowded.any():
                 last = left if depth == _MAX_DEPTH else left & crowded[box]
-                for position in np.flatnonzero(last):
-                    interval = int(box[position])
-                    if verdicts[interval] is None:
-                        low, high = self.bounds[interval]
-                        verdicts[interval] = Between(
-                            low, high, UNDECIDED, float(focal[position]), float(value[position])
-                        )
-                decided[box[last]] = True
+                self._decide(verdicts, decided, box, np.flatnonzero(last), UNDECIDED, focal, value)
                 if depth == _MAX_DEPTH:
                     break
                 left &= ~crowded[box]
@@ -556,6 +543,27 @@ class _Intervals:
         return [
             v if v is not None else Between(*self.bounds[i], CLEAR) for i, v in enumerate(verdicts)
         ]
+
+    def _decide(
+        self,
+        verdicts: list[Between | None],
+        decided: np.ndarray,
+        box: np.ndarray,
+        positions: np.ndarray,
+        verdict: str,
+        focal: np.ndarray,
+        value: np.ndarray,
+    ) -> None:
+        """Give the interval of each box at ``positions``, in that order, the
+        ``verdict`` at that box's focal length, unless it has one already."""
+        for position in positions:
+            interval = int(box[position])
+            if verdicts[interval] is None:
+                low, high = self.bounds[interval]
+                verdicts[interval] = Between(
+                    low, high, verdict, float(focal[position]), float(value[position])
+                )
+        decided[box[positions]] = True
 
     def _clear(
         self,
