@@ -35,12 +35,15 @@ def _quoted(text: str) -> str:
     return '"' + text.replace('"', '""') + '"' if _NEEDS_QUOTES.search(text) else text
 
 
-def text_column(values: list) -> list[str]:
-    """Values as CSV fields; the common column that needs no quoting costs one scan."""
-    texts = [v if isinstance(v, str) else str(v) for v in values]
-    if _NEEDS_QUOTES.search("\0".join(texts)):
-        return [_quoted(text) for text in texts]
-    return texts
+def text_column(values: list, all_text: bool = False) -> list[str]:
+    """Values as CSV fields (``all_text``: they are all ``str`` already); the
+    common column that needs no quoting costs one scan, and a column that
+    does is quoted once per distinct text (lens names and messages repeat)."""
+    texts = values if all_text else [v if isinstance(v, str) else str(v) for v in values]
+    if _NEEDS_QUOTES.search("\0".join(texts)) is None:
+        return texts
+    quoted = {text: _quoted(text) for text in dict.fromkeys(texts)}
+    return list(map(quoted.__getitem__, texts))
 
 
 def write_rows(stream: TextIO, header: Sequence[str], columns: Iterable[Iterable]) -> None:
@@ -60,6 +63,10 @@ def write_rows(stream: TextIO, header: Sequence[str], columns: Iterable[Iterable
             fields.append(format_floats(values))
         elif kinds <= {bool, type(None)}:
             fields.append(list(map(_BOOLEAN.__getitem__, values)))
+        elif kinds <= {str}:
+            fields.append(text_column(values, all_text=True))
+        elif kinds <= {int}:
+            fields.append(list(map(int.__repr__, values)))
         elif kinds <= {str, int}:
             fields.append(text_column(values))
         else:  # mixed: each value as its kind is written
