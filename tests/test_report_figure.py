@@ -193,6 +193,14 @@ def test_bars_below_one_stand_out_in_colour():
     assert [t for _, t in below_one_labels(axes)] == ["1", "1"]
 
 
+def test_minor_ticks_mark_two_and_five_times_each_power_of_ten(bundled_figure):
+    for axes in bundled_figure.axes[:2]:
+        for axis, (low, high) in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
+            shown = [t for t in axis.get_minorticklocs() if low <= t <= high]
+            mantissas = {round(t / 10 ** math.floor(math.log10(t) + 1e-9), 6) for t in shown}
+            assert shown and mantissas == {2.0, 5.0}
+
+
 def test_figure5_draws_nothing_outside_its_canvas(bundled_figure):
     renderer = bundled_figure.canvas.get_renderer()
     canvas = bundled_figure.bbox
