@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -36,7 +37,12 @@ def one_cpu(monkeypatch):
 def test_results_are_the_serial_ones_in_order(forced):
     parent = os.getpid()
     items = list(range(40))
-    found = map_sized(lambda n: (n * n, str(n), os.getpid() != parent), items, [1] * 40)
+
+    def squared(n: int) -> tuple[int, str, bool]:
+        time.sleep(0.001)  # time enough for the forked processes to take some
+        return n * n, str(n), os.getpid() != parent
+
+    found = map_sized(squared, items, [1] * 40)
     assert [(square, text) for square, text, _ in found] == [(n * n, str(n)) for n in items]
     assert any(elsewhere for _, _, elsewhere in found)  # forked processes took part
     assert no_child_left()
@@ -108,11 +114,60 @@ def test_processes_are_ended_when_the_work_here_fails(forced):
     def interrupted_here(n: int) -> int:
         if os.getpid() == parent:
             raise KeyboardInterrupt
+        time.sleep(0.05)  # slow elsewhere: an item is left for this process
         return n
 
     with pytest.raises(KeyboardInterrupt):
         map_sized(interrupted_here, list(range(10)), [1] * 10)
     assert no_child_left()
+
+
+def test_every_item_is_done_once_however_many_there_are(forced, tmp_path):
+    # More items than a pipe holds tickets for: each ticket is a run of items.
+    count = 3 * parallel._Queue.MOST + 5
+
+    def marked(n: int) -> int:
+        (tmp_path / str(n)).touch(exist_ok=False)  # a second time would raise
+        return -n
+
+    assert map_sized(marked, list(range(count)), list(range(count))) == [-n for n in range(count)]
+    assert len(list(tmp_path.iterdir())) == count
+    assert no_child_left()
+
+
+def test_a_slow_process_takes_fewer_items(forced):
+    # This process is slowed (as by the report's drawing beside it): the others
+    # take the items it would have had in a share of its own.
+    parent = os.getpid()
+
+    def slow_here(n: int) -> int:
+        if os.getpid() == parent:
+            time.sleep(0.2)
+        else:
+            time.sleep(0.002)
+        return os.getpid()
+
+    found = map_sized(slow_here, list(range(60)), [1] * 60)
+    assert found.count(parent) <= 2 < len(found)
+
+
+def test_items_are_taken_largest_first(forced):
+    # Whatever the others take, the items this process takes come in the order
+    # of their sizes, largest first.
+    parent = os.getpid()
+    sizes = [5, 1, 40, 3, 3, 17, 0, 2, 8, 9, 1, 30, 6, 12, 4, 22]
+    here: list[int] = []
+
+    def noted(n: int) -> int:
+        if os.getpid() == parent:
+            here.append(n)
+        else:
+            time.sleep(0.02)
+        return n
+
+    assert map_sized(noted, list(range(len(sizes))), sizes) == list(range(len(sizes)))
+    taken = [sizes[n] for n in here]
+    assert len(taken) > 1 and taken == sorted(taken, reverse=True)
 
 
 def test_small_inputs_are_done_here(monkeypatch):

@@ -1,15 +1,19 @@
 """Work on every core: files parsed (the reader), a share of the files'
 rules (check), Figure 5 drawn beside the report (:mod:`lensaudit.report.drawing`).
 
-:func:`map_sized` applies a function to a list of items, split into one
-share per CPU by size (largest first, each to the lightest share). Where it
-is safe and pays (``os.fork`` exists, this process runs one thread, more
-than one CPU is available and there is enough to do), each share but the
-first goes to a forked process, which sends its results back through a pipe
-as :mod:`marshal` data (so results must be plain data); the first is done
-here meanwhile. A share whose process fails is done here afterwards, where
-any error then shows itself. :func:`can_fork`, :func:`received` and
-:func:`stop` are the same rules and steps for a process forked otherwise.
+:func:`map_sized` applies a function to a list of items on every CPU.
+Where it is safe and pays (``os.fork`` exists, this process runs one thread,
+more than one CPU is available and there is enough to do), it forks a
+process per CPU but one; this process and those take the items, largest
+first, each the next one left when it is free, so that a process slowed by
+another (the report's drawing, a busy machine) takes fewer. The items left
+are handed out as tickets in a pipe, which every process reads a ticket at
+a time. A forked process sends its results back through a pipe as
+:mod:`marshal` data (so results must be plain data). An item whose process
+fails is done here afterwards, where any error then shows itself.
+:func:`shares` splits items into shares of about equal size, for work done
+a share at a time. :func:`can_fork`, :func:`received` and :func:`stop` are
+the same rules and steps for a process forked otherwise.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from __future__ import annotations
 import marshal
 import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 # typing only for type checkers
 TYPE_CHECKING = False
@@ -57,36 +61,73 @@ def can_fork() -> bool:
 
 
 def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Sequence[int]) -> list:
-    """``[function(item) for item in items]``, spread over the CPUs by ``sizes``."""
+    """``[function(item) for item in items]``, spread over the CPUs, largest ``sizes`` first."""
     count = min(cpus(), MAX_PROCESSES, len(items))
     if count < 2 or sum(sizes) < MIN_BYTES or not can_fork():
         return [function(item) for item in items]
-    first, *others = shares(sizes, count)
+    queue = _Queue(sorted(range(len(items)), key=sizes.__getitem__, reverse=True))
     results: dict[int, Any] = {}
     children: list[tuple[int, int]] = []
     try:
-        for share in others:
-            children.append(_fork(function, items, share))
-        for index in first:
+        for _ in range(count - 1):
+            children.append(_fork(function, items, queue))
+        for index in queue.taken():
             results[index] = function(items[index])
         while children:
             pid, output = children[0]
             results.update(_collect(pid, output))
             children.pop(0)
     finally:
+        queue.close()
         for pid, output in children:  # after an error here: no child outlives it
             stop(pid, output)
     return [results[i] if i in results else function(items[i]) for i in range(len(items))]
 
 
-def _fork(function: Callable[[Any], Any], items: Sequence[Any], share: list[int]) -> tuple:
+class _Queue:
+    """Items handed out in ``order`` to whichever process asks first: a pipe
+    holds a ticket per run of items, and each process reads a ticket at a
+    time. Reads of a pipe are whole, so that no two processes share a ticket."""
+
+    #: The bytes of a ticket: the number of its run.
+    TICKET = 4
+    #: Tickets at most: a pipe holds one page (4 KiB), however little the system allows.
+    MOST = 4096 // TICKET
+
+    def __init__(self, order: list[int]) -> None:
+        self.order = order
+        #: Items per ticket: one, unless there are more items than tickets.
+        self.run = -(-len(order) // self.MOST) or 1
+        tickets = -(-len(order) // self.run)
+        self.output, output_input = os.pipe()
+        try:
+            os.write(output_input, b"".join(t.to_bytes(self.TICKET, "little") for t in range(tickets)))
+        finally:
+            os.close(output_input)  # none is added: a read of the empty pipe ends the taking
+
+    def taken(self) -> Iterator[int]:
+        """The indices this process takes, a ticket at a time, until none is left
+        (or a read is not whole: no such system is known)."""
+        while True:
+            ticket = os.read(self.output, self.TICKET)
+            if len(ticket) != self.TICKET:
+                return
+            start = int.from_bytes(ticket, "little") * self.run
+            yield from self.order[start : start + self.run]
+
+    def close(self) -> None:
+        os.close(self.output)
+
+
+def _fork(function: Callable[[Any], Any], items: Sequence[Any], queue: _Queue) -> tuple:
     output, output_input = os.pipe()
     pid = os.fork()
-    if pid == 0:  # the child: do its share, send it, leave without the parent's cleanup
+    if pid == 0:  # the child: take items, send what it made, leave without the parent's cleanup
         code = 1
         try:
             os.close(output)
-            data = marshal.dumps([(index, function(items[index])) for index in share])
+            made = [(index, function(items[index])) for index in queue.taken()]
+            data = marshal.dumps(made)
             with open(output_input, "wb", closefd=True) as stream:
                 stream.write(data)
             code = 0
