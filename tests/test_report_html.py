@@ -139,6 +139,29 @@ def test_every_entry_is_in_the_table_data_with_file_and_line(page):
     assert status == ["ok", "ok", "ok", "unknown_model"]
 
 
+def test_table_data_are_the_csv_values_to_six_digits(hostile_report, page):
+    data = json.loads(page.xpath('//script[@id="entries-data"]')[0].text)
+    names = [c[0] for c in data["columns"]]
+    with (hostile_report[1] / "entries.csv").open(newline="") as stream:
+        records = list(csv.DictReader(stream))
+    assert len(records) == len(data["rows"])
+    for row, record in zip(data["rows"], records, strict=True):
+        shown = dict(zip(names, row, strict=True))
+        for name in ("focal", "crop_factor", "aspect_ratio", "r_max", "d_max", "r_normalized"):
+            text = record[name]
+            if text in ("", "inf", "-inf"):
+                assert shown[name] == (None if text == "" else text), name
+            else:
+                assert shown[name] == pytest.approx(float(text), rel=5e-6), name
+        for name in ("maker", "lens", "type", "model", "tail", "status"):
+            assert shown[name] == record[name], name
+        folds = {"true": True, "false": False, "": None}[record["folds_in_image"]]
+        assert shown["folds_in_image"] is folds
+    # Each model's own coefficients as the XML writes them, and no others.
+    coefficients = [row[names.index("coefficients")] for row in data["rows"]]
+    assert coefficients == ["k1=-0.3", "k1=0.01", "a=0 b=-0.1 c=0", ""]
+
+
 def test_names_from_the_xml_are_escaped(hostile_report, page):
     text = hostile_report[2]
     assert HOSTILE_LENS not in text and "<b>bold</b>" not in text

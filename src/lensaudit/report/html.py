@@ -250,20 +250,38 @@ def script_json(data: Any) -> str:
     return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
+#: The coefficients each model uses, as the entry table names them.
+_MODEL_COEFFICIENTS = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "poly5": ("k1", "k2")}
+
+
 def coefficients_text(record: dict[str, Any]) -> str:
     """ "a=0.01 b=-0.02 c=0" style text of the coefficients a model uses."""
-    names = {"ptlens": "abc", "poly3": ("k1",), "poly5": ("k1", "k2")}.get(record["model"], ())
+    names = _MODEL_COEFFICIENTS.get(record["model"], ())
     return " ".join(f"{n}={record[n]:g}" for n in names if not math.isnan(record[n]))
 
 
 def entry_rows(audit: Audit) -> list[list[Any]]:
-    """The entry table's rows, values as in :data:`ENTRY_COLUMNS`."""
-    rows = []
-    for record in audit.records():
-        record["where"] = f"{record['file']}:{record['line']}"
-        record["coefficients"] = coefficients_text(record)
-        rows.append([_json_value(record[key]) for key, _, _ in ENTRY_COLUMNS])
-    return rows
+    """The entry table's rows, values as in :data:`ENTRY_COLUMNS`, made column by column."""
+    names = ("model", "a", "b", "c", "k1", "k2")
+    models = zip(*map(audit.column, names), strict=True)
+    columns = {
+        "where": [
+            f"{file}:{line}"
+            for file, line in zip(audit.column("file"), audit.column("line"), strict=True)
+        ],
+        "coefficients": [coefficients_text(dict(zip(names, m, strict=True))) for m in models],
+    }
+    made = []
+    for key, _, _ in ENTRY_COLUMNS:
+        values = columns[key] if key in columns else audit.column(key)
+        made.append(list(map(_json_value, values)) if key in _FLOAT_KEYS else values)
+    return list(map(list, zip(*made, strict=True)))
+
+
+#: The entry table's columns that hold floats.
+_FLOAT_KEYS = frozenset({"focal", "crop_factor", "aspect_ratio", "r_max", "d_max"}) | {
+    "r_normalized", "r_normalized_paper",
+}
 
 
 def _number(value: float, digits: int = 4) -> str:
