@@ -2,9 +2,9 @@
 point, ``write(audit, stream)``.
 
 The row formats (CSV, JSON) render every row at once, column by column: each
-column's values become texts in one pass (:mod:`lensaudit.columns`), and the
-rows are the columns interleaved with the literals between them
-(:func:`interleaved`).
+column's values become texts in one pass (:mod:`lensaudit.columns`); a CSV
+line is its fields joined by commas, a JSON entry the fields interleaved
+with the literals between them (:func:`interleaved`).
 """
 
 from __future__ import annotations

@@ -17,7 +17,6 @@ from ..columns import (
     format_float,
     format_floats,
 )
-from . import interleaved
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -82,9 +81,11 @@ def write_rows(stream: TextIO, header: Sequence[str], columns: Iterable[Iterable
                     ]
                 )
             )
+    if len(fields) == 1:  # an empty field alone is quoted: an empty line would be no row
+        fields[0] = [text or '""' for text in fields[0]]
     stream.write(",".join(text_column(list(header))) + "\n")
-    if fields:
-        stream.write(interleaved(["", *[","] * (len(fields) - 1), "\n"], fields))
+    if fields and fields[0]:  # a line per row: cheaper than interleaving every field
+        stream.write("\n".join(map(",".join, zip(*fields, strict=True))) + "\n")
 
 
 def write(audit: Audit, stream: TextIO) -> None:
