@@ -101,7 +101,9 @@ class _Queue:
         tickets = -(-len(order) // self.run)
         self.output, output_input = os.pipe()
         try:
-            os.write(output_input, b"".join(t.to_bytes(self.TICKET, "little") for t in range(tickets)))
+            os.write(
+                output_input, b"".join(t.to_bytes(self.TICKET, "little") for t in range(tickets))
+            )
         finally:
             os.close(output_input)  # none is added: a read of the empty pipe ends the taking
 

@@ -279,9 +279,9 @@ def entry_rows(audit: Audit) -> list[list[Any]]:
 
 
 #: The entry table's columns that hold floats.
-_FLOAT_KEYS = frozenset({"focal", "crop_factor", "aspect_ratio", "r_max", "d_max"}) | {
-    "r_normalized", "r_normalized_paper",
-}
+_FLOAT_KEYS = frozenset(
+    ("focal", "crop_factor", "aspect_ratio", "r_max", "d_max", "r_normalized", "r_normalized_paper")
+)
 
 
 def _number(value: float, digits: int = 4) -> str:
