@@ -11,6 +11,7 @@ import pytest
 from conftest import lens_xml
 from lensaudit.read import LoadError, read, read_bytes
 from lensaudit.read.records import MODEL_COEFFICIENTS, parse_number
+from lensaudit.read.tables import SPECS
 
 
 def load_bytes(data: bytes, name: str) -> list:
@@ -433,3 +434,23 @@ def test_text_split_by_other_markup_is_read_as_liblensfun_master_reads_it(maker)
     )
     [lens] = lenses(xml.encode())
     assert only(load_bytes(xml.encode(), "db.xml")).maker == lens["maker"].strip()
+
+
+def test_calibrations_of_one_point_share_its_numbers_and_keep_their_own():
+    # A file's vignetting rows repeat a few focal lengths, apertures and
+    # distances: one float each, whatever the rows (memory), with the value
+    # and sign of each text.
+    xml = lens_xml(
+        '<vignetting model="pa" focal="24" aperture="2.8" distance="10" k1="-0.5"/>',
+        '<vignetting model="pa" focal="24" aperture="2.8" distance="1e3" k1="-0.25"/>',
+        '<vignetting model="pa" focal="24.0" aperture="4" distance="10" k1="-0.5"/>',
+        '<vignetting model="pa" focal="-24" aperture="4" distance="10" k1="-0.5"/>',
+    )
+    rows = read_bytes(xml.encode(), "db.xml", calibrations=True).vignetting
+    fields = SPECS["vignetting"].row_fields
+    focal, aperture, distance, k1 = map(fields.index, ("focal", "aperture", "distance", "k1"))
+    assert [row[focal] for row in rows[:3]] == [24.0, 24.0, 24.0]
+    assert rows[0][focal] is rows[1][focal] and rows[0][aperture] is rows[1][aperture]
+    assert rows[0][distance] is rows[2][distance] and rows[1][distance] == 1000.0
+    assert [row[k1] for row in rows[:3]] == [-0.5, -0.25, -0.5]
+    assert rows[3][-2] != "ok" and "focal" in rows[3][-1]  # not positive: examined in full

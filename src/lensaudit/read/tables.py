@@ -338,6 +338,8 @@ _LAYOUT = {
     )
     for model, names in MODEL_COEFFICIENTS.items()
 }
+#: Each model's name: every row of a model holds this one text, not a copy of its own.
+_MODEL_NAMES = {model: model for model in MODEL_COEFFICIENTS}
 #: Per model, each coefficient attribute and its default.
 _MODEL_DEFAULTS = {model: dict.fromkeys(names, 0.0) for model, names in MODEL_COEFFICIENTS.items()}
 
@@ -348,7 +350,7 @@ def distortion_row(element: etree._Element, context: LensContext, line: int) -> 
     model with plain numbers, takes a short path; anything else is examined
     in full by :func:`_checked_distortion_row`, to the same result."""
     get = element.get
-    model = get("model")
+    model = _MODEL_NAMES.get(get("model"))  # type: ignore[arg-type]
     names = MODEL_COEFFICIENTS.get(model)  # type: ignore[arg-type]
     focal_text = get("focal")
     if names is not None and focal_text is not None and not context.problem:
@@ -450,27 +452,51 @@ class CalibrationSpec:
 
     def _fast_path(self, model: str) -> tuple:
         """The attributes read for ``model``, in order, the text each defaults to
-        (None: required), and the getter of ``focal`` and the fields from
-        their values (with NaN appended at the end)."""
+        (None: required), the getter of ``focal`` and the fields from their
+        values (with NaN appended at the end), and the model's name: every
+        row holds that one text, not a copy of its own."""
         coefficients = self.models[model]
         names = self.required + tuple(coefficients)
         defaults = (None,) * len(self.required) + tuple(repr(v) for v in coefficients.values())
         missing = len(names)
         wanted = ("focal", *self.fields)
         layout = itemgetter(*(names.index(n) if n in names else missing for n in wanted))
-        return names, defaults, layout
+        return names, defaults, layout, model
 
-    def row(self, element: etree._Element, context: LensContext, line: int) -> tuple:
+    def row(
+        self,
+        element: etree._Element,
+        context: LensContext,
+        line: int,
+        numbers: dict[str, float],
+    ) -> tuple:
         """The row of one element. The common case (plain numbers) takes a short
-        path; anything else is examined in full, to the same result."""
+        path; anything else is examined in full, to the same result.
+
+        ``numbers`` holds the value of each text of a required attribute met
+        before, plain and positive (a file's calibrations share a few focal
+        lengths, apertures and distances): rows of one text hold one float,
+        not a copy each, and the text is not read again."""
         get = element.get
         model = get("model")
         fast = self._fast.get(model)  # type: ignore[arg-type]
         if fast is not None and not context.problem:
-            names, defaults, layout = fast
+            names, defaults, layout, model = fast
             texts = list(map(get, names, defaults))
-            values = None if None in texts else plain_numbers(texts)  # all required given
-            if values is not None and min(values[: len(self.required)]) > 0:
+            required = len(self.required)
+            values = list(map(numbers.get, texts[:required]))  # type: ignore[arg-type]
+            if None not in values:  # every required text met before
+                coefficients = plain_numbers(texts[required:])
+                values = None if coefficients is None else values + coefficients
+            elif None not in texts:  # all required given
+                values = plain_numbers(texts)
+                if values is not None and min(values[:required]) > 0:
+                    values[:required] = map(numbers.setdefault, texts[:required], values[:required])
+                else:
+                    values = None
+            else:
+                values = None
+            if values is not None:
                 values.append(NAN)
                 return (
                     line,
@@ -548,6 +574,7 @@ class FileReader:
         self.lens_of_tca: list[int | None] | None = [] if calibrations else None
         self.cameras: list[tuple] = []
         self.mount_names: list[tuple[int, str]] = []
+        self._numbers: dict[str, float] = {}  # see CalibrationSpec.row
         #: Where liblensfun stops reading the pieces so far, why, and how many of
         #: the lenses before it holds: (line, reason, lenses kept), or None.
         self.refusal: tuple[int, str, int] | None = None
@@ -604,6 +631,7 @@ class FileReader:
                     self.refusal = (*refusal, first_lens)
         rows = {VIGNETTING: self.vignetting, TCA: self.tca}
         lens_of = {VIGNETTING: self.lens_of_vignetting, TCA: self.lens_of_tca}
+        numbers = self._numbers
         for element, context in found:
             tag = element.tag
             if tag == _DISTORTION:
@@ -611,7 +639,7 @@ class FileReader:
                 self.lens_of_row.append(context.index)
                 self.omitted.append(omitted_coefficients(element))
             else:
-                rows[tag].append(SPECS[tag].row(element, context, line_of(element)))  # type: ignore[union-attr]
+                rows[tag].append(SPECS[tag].row(element, context, line_of(element), numbers))  # type: ignore[union-attr]
                 lens_of[tag].append(context.index)  # type: ignore[union-attr]
 
     def _tables(self) -> tuple[list | None, ...]:
