@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -213,6 +214,28 @@ def test_lens_definitions_that_differ_in_a_comment_only_are_identical(tmp_path):
     commented = lens("Lens A", FINE).replace("<calibration>", "<calibration><!-- by me -->")
     (tmp_path / "a.xml").write_text(xml(lens("Lens A", FINE), commented))
     assert [f.severity for f in check(tmp_path / "a.xml").findings] == ["warning"]
+
+
+@pytest.mark.parametrize(
+    "first, second, severity",
+    [
+        # Numbers compare as numbers: the same value written otherwise is the same.
+        ('k1="-0.5" k2="0"', 'k1="-0.50" k2="-0"', "warning"),
+        ('k1="-0.5"', 'k1="-0.5" k2="0" k3="0.0"', "warning"),  # omitted: the default
+        ('k1="-0.5"', 'k1="-0.5" k2="1e-300"', "error"),
+        ('k1="-0.5"', None, "error"),  # one calibrates vignetting, the other does not
+    ],
+)
+def test_lens_definitions_are_identical_when_their_values_are(tmp_path, first, second, severity):
+    def with_vignetting(attributes):
+        if attributes is None:
+            return lens("Lens A", FINE)
+        row = f'<vignetting model="pa" focal="10" aperture="2.8" distance="10" {attributes}/>'
+        return lens("Lens A", FINE).replace("</calibration>", row + "</calibration>")
+
+    (tmp_path / "a.xml").write_text(xml(with_vignetting(first), with_vignetting(second)))
+    found = [(f.severity, f.code) for f in check(tmp_path / "a.xml").findings]
+    assert (severity, "duplicate-lens") in found
 
 
 def test_two_lens_definitions_with_different_entries_are_an_error(tmp_path):

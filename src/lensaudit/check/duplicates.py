@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
+from ..read.cache import content_hasher
 from ..read.records import DistortionEntry
 from .matching import entry_content, lens_identity
 from .parsing import LensRecord, ParsedSource
@@ -48,7 +49,7 @@ class Known:
         self._read = [file for file in read if file.problem is None]
         self._entries: dict[tuple, list[DistortionEntry]] | None = None
         self._lenses: dict[tuple, list[tuple[ParsedSource, int]]] | None = None
-        self._contents: dict[int, list[tuple]] = {}
+        self._contents: dict[int, list[bytes]] = {}
 
     def has_entry(self, name: tuple, content: tuple) -> bool:
         """Whether the baseline has a distortion entry of this content for a
@@ -61,7 +62,7 @@ class Known:
                     self._entries.setdefault(key, []).append(entry)
         return any(entry_content(entry) == content for entry in self._entries.get(name, ()))
 
-    def has_lens(self, key: tuple, content: tuple) -> bool:
+    def has_lens(self, key: tuple, content: bytes) -> bool:
         """Whether the baseline has a lens of this name key with this content."""
         if self._lenses is None:
             self._lenses = {}
@@ -155,9 +156,9 @@ def duplicate_lenses(
     """
     first: dict[tuple, tuple[int, ParsedSource, LensRecord]] = {}
     # Contents for duplicates only: they are rare.
-    contents: dict[int, list[tuple]] = {}  # the contents of a file's lenses, by id(file)
+    contents: dict[int, list[bytes]] = {}  # the contents of a file's lenses, by id(file)
 
-    def content_of(file: ParsedSource, lens: LensRecord) -> tuple:
+    def content_of(file: ParsedSource, lens: LensRecord) -> bytes:
         if id(file) not in contents:
             contents[id(file)] = lens_contents(file)
         return contents[id(file)][lens.index]
@@ -225,26 +226,33 @@ def duplicate_lenses(
             yield here_index, Identified(finding, keys, names)
 
 
-def lens_contents(file: ParsedSource) -> list[tuple]:
-    """What each lens of a file is made of, in order: its elements other than
-    its untranslated names and its calibrations, the values of its own
-    distortion entries (:func:`~lensaudit.check.matching.entry_content`:
-    without names or lines), and those of its vignetting and TCA entries
-    (without their lines and names), each in document order."""
+def lens_contents(file: ParsedSource) -> list[bytes]:
+    """What each lens of a file is made of, in order, as a digest: its
+    elements other than its untranslated names and its calibrations, the
+    values of its own distortion entries
+    (:func:`~lensaudit.check.matching.entry_content`: without names or
+    lines), and those of its vignetting and TCA entries (without their lines
+    and names), each in document order. Two lenses made of the same values
+    have the same digest, and (but for a BLAKE2b collision) no others: a
+    digest costs 16 bytes where the values would cost the file's size again,
+    in a database whose lenses are all duplicated."""
     tables = file.tables
-    entries: list[list[tuple]] = [[] for _ in file.lenses]
+    made = [content_hasher(_text(lens.content)) for lens in file.lenses]
     for entry, lens in zip(file.entries, file.lens_of_entry, strict=True):
         if lens is not None:
-            entries[lens].append(entry_content(entry))
-    calibrations: list[list[tuple]] = [[] for _ in file.lenses]
-    for rows, lenses in ((tables.vignetting, tables.lens_of_vignetting),
-                         (tables.tca, tables.lens_of_tca)):  # fmt: skip
+            made[lens].update(b"d" + _text(entry_content(entry)))
+    for kind, rows, lenses in ((b"v", tables.vignetting, tables.lens_of_vignetting),
+                               (b"t", tables.tca, tables.lens_of_tca)):  # fmt: skip
         for row, lens in zip(rows or (), lenses or (), strict=True):
-            if lens is not None:
-                # Without line, maker and lens; NaN (a field left out) as None, so
-                # that equal contents compare equal whichever reading made them.
-                calibrations[lens].append(tuple(None if v != v else v for v in row[3:]))
-    return [
-        (lens.content, tuple(own), tuple(more))
-        for lens, own, more in zip(file.lenses, entries, calibrations, strict=True)
-    ]
+            if lens is not None:  # without line, maker and lens
+                made[lens].update(kind + _text(row[3:]))
+    return [hasher.digest() for hasher in made]
+
+
+def _text(values: tuple) -> bytes:
+    """``values`` as bytes that no other values give, their length first. Floats
+    are written as they compare: NaN (a field left out) as None, -0.0 as 0.0."""
+    text = repr(
+        tuple(None if v != v else v + 0.0 if v.__class__ is float else v for v in values)
+    ).encode()
+    return b"%d:%s" % (len(text), text)

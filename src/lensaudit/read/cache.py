@@ -35,6 +35,11 @@ from pathlib import Path
 from ..version import __version__
 from .paths import read_file
 
+# typing only for type checkers
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any
+
 try:  # BLAKE2 alone: hashlib would also load OpenSSL, which a warm scan does not need
     from _blake2 import blake2b
 except ImportError:  # pragma: no cover - every CPython has _blake2
@@ -58,6 +63,12 @@ _ERRORS = (OSError, ValueError, EOFError, TypeError, KeyError, IndexError)
 def content_digest(data: bytes) -> bytes:
     """The key of a file's bytes."""
     return blake2b(data, digest_size=_DIGEST_SIZE).digest()
+
+
+def content_hasher(data: bytes = b"") -> Any:
+    """A hash object (``update``, ``digest``) that gives :func:`content_digest`
+    of all the bytes it is given, for what is made of pieces."""
+    return blake2b(data, digest_size=_DIGEST_SIZE)
 
 
 def cache_dir() -> Path:
