@@ -167,6 +167,15 @@ class CalibrationRecords(Sequence[Any]):
     def __repr__(self) -> str:
         return f"CalibrationRecords({self.kind!r}, {len(self)} records)"
 
+    def each(self, name: str) -> Iterator[Any]:
+        """One field of every record, in order, for one pass: unlike :meth:`column`,
+        nothing is kept (a rule that looks once leaves no column behind)."""
+        if name == "file":
+            return iter(self._names)
+        if name in self._columns:
+            return iter(self._columns[name])
+        return map(itemgetter(SPECS[self.kind].row_fields.index(name)), self._rows)
+
     def column(self, name: str) -> list[Any]:
         """One field of every record, in order; kept, so callers must not change it."""
         if name == "file":

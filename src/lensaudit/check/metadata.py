@@ -181,15 +181,14 @@ def conflicting_calibrations(file: ParsedSource) -> Iterable[Identified]:
         # its last row (a lens's rows come together: few are kept at once).
         last = {lens: position for position, lens in enumerate(lenses)}
         first: dict[int | None, dict[tuple, int]] = {}
-        statuses = records.column("status")
-        crops = records.column("crop_factor")
         names = ("focal", "aperture", "distance") if kind == VIGNETTING else ("focal",)
-        points = zip(*(records.column(name) for name in names), strict=True)
-        for position, (lens, point) in enumerate(zip(lenses, points, strict=False)):
-            if lens is None or statuses[position] != STATUS_OK:
+        points = zip(*map(records.each, names), strict=True)
+        rows = zip(lenses, records.each("status"), records.each("crop_factor"), points, strict=False)
+        for position, (lens, status, crop, point) in enumerate(rows):
+            if lens is None or status != STATUS_OK:
                 continue
             own = first.setdefault(lens, {})
-            earlier_position = own.setdefault((crops[position], point), position)
+            earlier_position = own.setdefault((crop, point), position)
             if last[lens] == position:
                 del first[lens]
             if earlier_position == position:
@@ -301,7 +300,7 @@ def starting_values(file: ParsedSource) -> Iterable[Identified]:
     if file.problem is not None or VIGNETTING not in file.calibrations:
         return
     records = file.calibrations[VIGNETTING]
-    columns = zip(*map(records.column, ("status", "k1", "k2", "k3")), strict=True)
+    columns = zip(*map(records.each, ("status", "k1", "k2", "k3")), strict=True)
     for position, (status, *coefficients) in enumerate(columns):
         if status != STATUS_OK or tuple(coefficients) != STARTING_VALUES:
             continue
