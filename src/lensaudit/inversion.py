@@ -53,7 +53,9 @@ BAND = 64
 #: Rows whose bands are sampled in one batch of arrays (a few MB of them).
 _ROWS_AT_ONCE = 256
 #: Samples iterated in one batch of arrays.
-_SAMPLES_AT_ONCE = 32768
+_SAMPLES_AT_ONCE = 8192
+#: Rows whose whole range is judged in one batch of arrays (about 2 KB a row).
+_RANGES_AT_ONCE = 4096
 
 #: What liblensfun does at a radius where the inversion fails.
 OUTCOME_NONE = 0
@@ -340,7 +342,11 @@ def inversion_failures(model: LiblensfunModel, r_corner: ArrayLike) -> Inversion
             )
         # Samples are float32 radii; the bands cover them with room for that rounding.
         top = corner[candidates] * (1 + 2.0**-20)
-        doubtful = candidates[~_proven(p, weight, np.zeros_like(top), top)]
+        parts = [slice(at, at + _RANGES_AT_ONCE) for at in range(0, top.size, _RANGES_AT_ONCE)]
+        proven = np.concatenate(
+            [_proven(p[at], weight[at], np.zeros_like(top[at]), top[at]) for at in parts]
+        )
+        doubtful = candidates[~proven]
         # Each row's samples are its own: rows a few at a time keep the arrays small.
         for start in range(0, doubtful.size, _ROWS_AT_ONCE):
             _sample_bands(model, doubtful[start : start + _ROWS_AT_ONCE], corner, r_fail, outcome)
