@@ -72,3 +72,35 @@ def test_the_rules_against_a_baseline_on_three_cores_find_what_one_finds(
     monkeypatch.setattr(parallel, "cpus", lambda: 3)
     assert _checked(changed, False, bundled_db) == alone
     assert sum(f.code == "fold-in-image" and not f.known for f in alone[0]) > 20
+
+
+def test_the_rules_across_files_on_another_core_find_what_they_find_here(
+    bundled_db: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(parallel, "cpus", lambda: 1)
+    alone = _checked(bundled_db, verbose=False)
+    # The duplicate-lens, undefined-mount and liblensfun-refuses rules look at
+    # every file: one more item of the rules' work, which the first core free
+    # takes. This process is slowed here, so that the other takes it.
+    parent = os.getpid()
+    made, duplicates = rules._rules, rules.duplicate_lenses
+
+    def slow_here(*args, **kwargs):
+        if os.getpid() == parent:
+            import time
+
+            time.sleep(1.0)
+        return made(*args, **kwargs)
+
+    def marked(*args, **kwargs):
+        (tmp_path / f"across-{os.getpid()}").touch()
+        return duplicates(*args, **kwargs)
+
+    monkeypatch.setattr(rules, "_rules", slow_here)
+    monkeypatch.setattr(rules, "duplicate_lenses", marked)
+    monkeypatch.setattr(parallel, "cpus", lambda: 2)
+    assert _checked(bundled_db, verbose=False) == alone
+    assert [p.name for p in tmp_path.iterdir()] != [f"across-{parent}"]
+    assert len(list(tmp_path.iterdir())) == 1
+    assert any(f.code == "liblensfun-refuses" for f in alone[0])
+    assert any(f.code == "undefined-mount" for f in alone[0])

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,21 +113,23 @@ def analyse_parsed(
     def add(file_index: int, item: Identified) -> None:
         ordered.append(((file_index, item.finding.line, len(ordered)), item))
 
+    def across() -> list[tuple[int, tuple]]:
+        """The findings of the rules that look across files, as plain data."""
+        found = [*duplicate_lenses(read, known), *undefined_mounts(read)]
+        found += [(i, item) for i, file in enumerate(read) for item in liblensfun_refusals(file)]
+        return [(index, _plain(item)) for index, item in found]
+
     for index, file in enumerate(read):
         if file.problem is not None:
             add(index, file_identified(file))
+    own_findings, across_files = file_findings(read, margin, verbose, cache, known, own, across)
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
-    for index, items in enumerate(file_findings(read, margin, verbose, cache, known, own)):
+    for index, items in enumerate(own_findings):
         for item in items:
             add(index, item)
-    for index, item in duplicate_lenses(read, known):
-        add(index, item)
-    for index, item in undefined_mounts(read):
-        add(index, item)
-    for index, file in enumerate(read):
-        for item in liblensfun_refusals(file):
-            add(index, item)
+    for index, item in across_files:
+        add(index, _identified(item))
     ordered.sort(key=lambda pair: pair[0])
     return files, [item for _, item in ordered]
 
@@ -139,16 +141,18 @@ def file_findings(
     cache: Cache | None = None,
     known: Known | None = None,
     own: dict[bytes, list[Identified]] | None = None,
-) -> list[list[Identified]]:
+    besides: Callable[[], list] = list,
+) -> tuple[list[list[Identified]], list]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
     calibrations, vignetting at the calibration script's starting values and
-    focal-series outliers (none for a file with a file-level problem). A
-    file whose digest ``own`` holds has the findings it holds there (the
-    same bytes make the same findings); the others are worked out and added
-    to ``own``."""
+    focal-series outliers (none for a file with a file-level problem); and
+    what ``besides()`` gives (plain data), worked out beside them, on the
+    first core free. A file whose digest ``own`` holds has the findings it
+    holds there (the same bytes make the same findings); the others are
+    worked out and added to ``own``."""
     if own is None:
-        return _file_findings(read, margin, verbose, cache, known)
+        return _file_findings(read, margin, verbose, cache, known, besides)
     found: list[list[Identified]] = [[] for _ in read]
     todo = []
     for index, file in enumerate(read):
@@ -157,12 +161,14 @@ def file_findings(
             found[index] = list(own[digest])
         else:
             todo.append(index)
-    made = _file_findings([read[index] for index in todo], margin, verbose, cache, known)
+    made, also = _file_findings(
+        [read[index] for index in todo], margin, verbose, cache, known, besides
+    )
     for index, items in zip(todo, made, strict=True):
         found[index] = items
         if read[index].digest:
             own[read[index].digest] = items
-    return found
+    return found, also
 
 
 def _file_findings(
@@ -171,17 +177,19 @@ def _file_findings(
     verbose: bool,
     cache: Cache | None,
     known: Known | None,
-) -> list[list[Identified]]:
+    besides: Callable[[], list] = list,
+) -> tuple[list[list[Identified]], list]:
     """:func:`file_findings` of files, every one worked out: the rules on
     every core where that pays, each core a share of the files (what a file
     makes alone does not depend on the others; see
-    :func:`lensaudit.read.parallel.map_sized`). The metrics of the entries
-    are worked out with the rules, or first here with a ``cache``, which
-    this process keeps."""
+    :func:`lensaudit.read.parallel.map_sized`), and ``besides()`` as one more
+    item, taken by the first core free. The metrics of the entries are
+    worked out with the rules, or first here with a ``cache``, which this
+    process keeps."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
-        return found  # numpy and the audits are not needed
+        return found, besides()  # numpy and the audits are not needed
     solved = None  # with a cache: index into read -> the metrics of its entries
     if cache is not None:
         solved = dict(zip(parsed, _solved([read[index] for index in parsed], cache), strict=True))
@@ -198,15 +206,18 @@ def _file_findings(
         )
         return [[_plain(item) for item in items] for items in made]
 
+    def job(batch: list[int] | None) -> list:
+        return besides() if batch is None else batch_findings(batch)
+
     sizes = [read[index].size for index in parsed]
     batches = [[parsed[p] for p in share] for share in parallel.shares(sizes, parallel.cpus())]
     batch_sizes = [sum(read[index].size for index in batch) for batch in batches]
-    for batch, made in zip(
-        batches, parallel.map_sized(batch_findings, batches, batch_sizes), strict=True
-    ):
-        for index, items in zip(batch, made, strict=True):
+    # The rules across files cost a fraction of a share's: taken last, by the first core free.
+    *made, also = parallel.map_sized(job, [*batches, None], [*batch_sizes, 0])
+    for batch, items_of in zip(batches, made, strict=True):
+        for index, items in zip(batch, items_of, strict=True):
             found[index] = [_identified(item) for item in items]
-    return found
+    return found, also
 
 
 def _solved(
