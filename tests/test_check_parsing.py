@@ -304,7 +304,9 @@ def test_a_baseline_read_from_the_database_tables_checks_as_one_parsed_anew(
     monkeypatch.setattr(
         checking,
         "parse_sources",
-        lambda sources, cache=None, parsed=(): parse_sources(sources, cache),
+        lambda sources, cache=None, parsed=(), meanwhile=None: parse_sources(
+            sources, cache, meanwhile=meanwhile
+        ),
     )
     anew = check(changed, baseline=bundled_db)
     assert shared.findings == anew.findings

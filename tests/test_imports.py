@@ -123,6 +123,22 @@ def test_the_reader_and_its_cache_import_neither_the_pipeline_nor_a_heavy_module
     assert not found & {"lensaudit.pipeline", *HEAVY}
 
 
+def test_the_check_reads_its_files_before_it_needs_numpy():
+    # The rules import numpy; a check imports it while its files are read
+    # (lensaudit.check.check), so importing the package or reading must not.
+    found = imported_modules(
+        "import lensaudit.check, lensaudit.cli.check\n"
+        "from lensaudit.check.inputs import sources_from_paths\n"
+        "from lensaudit.check.parsing import parse_sources\n"
+        "from lensaudit.read import resolve\n"
+        "read = parse_sources(sources_from_paths(resolve(None).paths))\n"
+        "assert read and all(f.problem is None for f in read)"
+    )
+    assert "lxml" in found and "numpy" not in found
+    found = imported_modules("from lensaudit.check import analyse")
+    assert "lensaudit.check.findings" in found and "numpy" in found
+
+
 def test_the_summary_does_not_import_the_pipeline_or_numpy():
     found = imported_modules("import lensaudit.summary")
     assert "lensaudit.summary" in found

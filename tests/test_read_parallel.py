@@ -170,6 +170,25 @@ def test_items_are_taken_largest_first(forced):
     assert len(taken) > 1 and taken == sorted(taken, reverse=True)
 
 
+def test_meanwhile_is_done_here_once_while_the_others_take_items(forced, tmp_path):
+    parent = os.getpid()
+
+    def meanwhile() -> None:
+        (tmp_path / f"meanwhile-{os.getpid()}").touch(exist_ok=False)
+        time.sleep(0.1)  # the others take items meanwhile
+
+    found = map_sized(lambda n: (n, os.getpid()), list(range(30)), [1] * 30, meanwhile)
+    assert [n for n, _ in found] == list(range(30))
+    assert [p.name for p in tmp_path.iterdir()] == [f"meanwhile-{parent}"]
+    assert {pid for _, pid in found} != {parent}  # taken elsewhere while this one waited
+
+
+def test_meanwhile_is_done_when_nothing_is_forked(one_cpu, tmp_path):
+    done = []
+    assert map_sized(lambda n: n + 1, [1, 2], [1, 1], lambda: done.append(1)) == [2, 3]
+    assert done == [1]
+
+
 def test_small_inputs_are_done_here(monkeypatch):
     monkeypatch.setattr(parallel, "cpus", lambda: 3)
     parent = os.getpid()

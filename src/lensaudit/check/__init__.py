@@ -86,10 +86,10 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from typing import Any
 
 from .. import read as reader
 from .duplicates import Known
-from .findings import analyse, analyse_parsed, fix_suggestion
 from .inputs import (
     HISTORY_DEPTH,
     GitOrigin,
@@ -140,8 +140,29 @@ from .result import (
     entry_key,
 )
 
-#: :func:`fix_suggestion`, by the private name some callers use.
-_fix_suggestion = fix_suggestion
+#: What :mod:`~lensaudit.check.findings` gives this package, loaded when first
+#: asked for: the rules import numpy, which reading the files does not need, so
+#: that a check imports it while the files are read (see :func:`check`).
+_FROM_FINDINGS = {
+    "analyse": "analyse",
+    "analyse_parsed": "analyse_parsed",
+    "fix_suggestion": "fix_suggestion",
+    "_fix_suggestion": "fix_suggestion",  # by the private name some callers use
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _FROM_FINDINGS:
+        from . import findings
+
+        return getattr(findings, _FROM_FINDINGS[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _load_rules() -> None:
+    """Import the rules (and numpy with them): done while the files are read."""
+    from . import findings  # noqa: F401
+
 
 __all__ = [
     "BAD_VALUE",
@@ -227,7 +248,7 @@ def check(
             "no file could be read: " + "; ".join(f"{s.display}: {s.error}" for s in sources)
         )
     store = reader.Cache() if cache else None  # one for the database and its baseline
-    read = parse_sources(sources, store)
+    read = parse_sources(sources, store, meanwhile=_load_rules)
     del sources  # their bytes: the files are read, and memory is for what they hold
     try:
         return _check(source, read, baseline, margin, verbose, store)
@@ -245,6 +266,8 @@ def _check(
     cache: reader.Cache | None,
 ) -> CheckResult:
     # inputs -> parsing (done) -> findings (-> matching, with a baseline) -> CheckResult
+    from .findings import analyse_parsed
+
     if baseline is None:
         files, current = analyse_parsed(read, margin, verbose, cache)
         return CheckResult(source.label, None, margin, files, [c.finding for c in current])

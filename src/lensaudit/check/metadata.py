@@ -183,8 +183,10 @@ def conflicting_calibrations(file: ParsedSource) -> Iterable[Identified]:
         first: dict[int | None, dict[tuple, int]] = {}
         names = ("focal", "aperture", "distance") if kind == VIGNETTING else ("focal",)
         points = zip(*map(records.each, names), strict=True)
-        rows = zip(lenses, records.each("status"), records.each("crop_factor"), points, strict=False)
-        for position, (lens, status, crop, point) in enumerate(rows):
+        statuses, crops = records.each("status"), records.each("crop_factor")
+        for position, (lens, status, crop, point) in enumerate(
+            zip(lenses, statuses, crops, points, strict=False)
+        ):
             if lens is None or status != STATUS_OK:
                 continue
             own = first.setdefault(lens, {})

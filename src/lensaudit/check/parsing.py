@@ -5,11 +5,10 @@ lenses, and the ``<vignetting>`` and ``<tca>`` records."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
-from .. import calibrations
 from .. import read as reader
 from ..read.cache import content_digest
 from ..read.records import (
@@ -25,6 +24,11 @@ from ..read.records import (
 from ..read.tables import KINDS, TCA, VIGNETTING
 from .inputs import Source
 from .result import NOT_A_DATABASE, SEVERITY_ERROR, UNREADABLE, XML_ERROR, Finding, clip
+
+# typing only for type checkers: parsing needs no numpy (the audits do)
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ..calibrations import CalibrationRecords
 
 #: The finding code of each file-level status of the reader.
 FILE_STATUS_CODES = {
@@ -118,16 +122,15 @@ class ParsedSource:
         return tuple(lens_record(lens, index) for index, lens in enumerate(self.tables.lenses))
 
     @cached_property
-    def calibrations(self) -> dict[str, calibrations.CalibrationRecords]:
+    def calibrations(self) -> dict[str, CalibrationRecords]:
         """``<vignetting>`` and ``<tca>`` records of a file that parsed, by kind."""
+        from ..calibrations import CalibrationRecords  # numpy: not needed to parse
+
         if self.problem is not None:
             return {}
         display = self.source.display
         rows = {VIGNETTING: self.tables.vignetting, TCA: self.tables.tca}
-        return {
-            kind: calibrations.CalibrationRecords.of_file(kind, display, rows[kind] or [])
-            for kind in KINDS
-        }
+        return {kind: CalibrationRecords.of_file(kind, display, rows[kind] or []) for kind in KINDS}
 
 
 def file_finding(tables: FileTables, display: str) -> Finding | None:
@@ -144,6 +147,7 @@ def parse_sources(
     sources: Sequence[Source],
     cache: reader.Cache | None = None,
     parsed: Sequence[ParsedSource] = (),
+    meanwhile: Callable[[], object] | None = None,
 ) -> list[ParsedSource]:
     """Every source read by :func:`lensaudit.read.read_contents`, on every core
     where that pays, with its vignetting and TCA rows; with a ``cache``,
@@ -151,7 +155,8 @@ def parse_sources(
     could not be read) is a file of status ``unreadable``. A source with the
     same bytes as one of ``parsed`` (files read before in this run, as a
     baseline shares most of its files with the database) takes its tables:
-    the reader's tables are made of the bytes alone."""
+    the reader's tables are made of the bytes alone. ``meanwhile`` is done
+    here while other processes read (see :func:`lensaudit.read.read_contents`)."""
     same = {file.digest: file.tables for file in parsed if file.digest}
     digests = [content_digest(s.data) if same and s.data is not None else b"" for s in sources]
     readable = [
@@ -159,7 +164,9 @@ def parse_sources(
         for s, digest in zip(sources, digests, strict=True)
         if s.data is not None and digest not in same
     ]
-    tables = iter(reader.read_contents(readable, cache, calibrations=True, refusals=True))
+    tables = iter(
+        reader.read_contents(readable, cache, calibrations=True, refusals=True, meanwhile=meanwhile)
+    )
     del readable  # the bytes of files on disk are not kept once read (see below)
     found_parsed = []
     for source, digest in zip(sources, digests, strict=True):

@@ -15,7 +15,7 @@ Nothing else in lensaudit touches XML.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
@@ -129,12 +129,14 @@ def read_contents(
     cache: Cache | None = None,
     calibrations: bool = False,
     refusals: bool = False,
+    meanwhile: Callable[[], object] | None = None,
 ) -> list[FileTables]:
     """The tables of files' contents, given as (bytes, display name, path or
     None). Contents the cache does not know are parsed on every core
-    (:func:`~lensaudit.read.parallel.map_sized`); with a cache, what is read
-    is kept there and the cache saved."""
-    found = _tables(contents, cache, calibrations, refusals)
+    (:func:`~lensaudit.read.parallel.map_sized`, which does ``meanwhile``
+    here while the other processes start reading); with a cache, what is
+    read is kept there and the cache saved."""
+    found = _tables(contents, cache, calibrations, refusals, meanwhile=meanwhile)
     if cache is not None:
         cache.save()
     return found
@@ -164,6 +166,7 @@ def _tables(
     calibrations: bool,
     refusals: bool = False,
     pieces: Pieces | None = None,
+    meanwhile: Callable[[], object] | None = None,
 ) -> list[FileTables]:
     """The tables of contents: from the cache where it has them (each content's
     digest is taken only for it), else parsed and kept there."""
@@ -178,7 +181,7 @@ def _tables(
     if todo:
         parse = partial(_parsed_values, calibrations=calibrations, refusals=refusals, pieces=pieces)
         sizes = [len(data) for data, *_ in todo]
-        values = parallel.map_sized(parse, [data for data, *_ in todo], sizes)
+        values = parallel.map_sized(parse, [data for data, *_ in todo], sizes, meanwhile)
         made = iter(_made(todo, values, cache, calibrations))
         found = [tables if tables is not None else next(made) for tables in found]
     return found  # type: ignore[return-value]

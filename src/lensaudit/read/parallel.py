@@ -60,10 +60,20 @@ def can_fork() -> bool:
     return hasattr(os, "fork") and cpus() > 1 and threading.active_count() == 1
 
 
-def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Sequence[int]) -> list:
-    """``[function(item) for item in items]``, spread over the CPUs, largest ``sizes`` first."""
+def map_sized(
+    function: Callable[[Any], Any],
+    items: Sequence[Any],
+    sizes: Sequence[int],
+    meanwhile: Callable[[], object] | None = None,
+) -> list:
+    """``[function(item) for item in items]``, spread over the CPUs, largest
+    ``sizes`` first. ``meanwhile()`` (work that does not depend on the items,
+    such as importing what comes next) is done here first, while the other
+    processes take items: it is not done in them."""
     count = min(cpus(), MAX_PROCESSES, len(items))
     if count < 2 or sum(sizes) < MIN_BYTES or not can_fork():
+        if meanwhile is not None:
+            meanwhile()
         return [function(item) for item in items]
     queue = _Queue(sorted(range(len(items)), key=sizes.__getitem__, reverse=True))
     results: dict[int, Any] = {}
@@ -71,6 +81,8 @@ def map_sized(function: Callable[[Any], Any], items: Sequence[Any], sizes: Seque
     try:
         for _ in range(count - 1):
             children.append(_fork(function, items, queue))
+        if meanwhile is not None:
+            meanwhile()
         for index in queue.taken():
             results[index] = function(items[index])
         while children:
