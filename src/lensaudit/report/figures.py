@@ -157,9 +157,12 @@ def figure5(histogram: Histogram) -> Figure:
     left, right = figure.subplots(1, 2, sharey=True)
     _bars(left, histogram, histogram.counts, BLUE, "r_normalized")
     _bars(right, histogram, histogram.counts_paper, GREY, "r_normalized_paper")
-    left.set_title("Correct units: D(r_max) / hypot(aspect, 1)", fontsize=9)
+    # At the top of each panel (y=1), where matplotlib would place them anyway
+    # (nothing is drawn above the panels): it then skips working that out
+    # from every tick label at each draw.
+    left.set_title("Correct units: D(r_max) / hypot(aspect, 1)", fontsize=9, y=1.0)
     right.set_title(
-        "Paper's mixed units: D(r_max) / (hypot(18, 12) / (crop \u00b7 focal))", fontsize=9
+        "Paper's mixed units: D(r_max) / (hypot(18, 12) / (crop \u00b7 focal))", fontsize=9, y=1.0
     )
     left.set_xlabel("r_normalized (Hugin units, both sides)")
     right.set_xlabel("r_normalized_paper (as in the paper's Figure 5)")
