@@ -104,3 +104,24 @@ def test_nothing_is_forked_while_another_thread_runs(forked):
 def test_a_result_before_a_histogram_is_an_error():
     with pytest.raises(RuntimeError):
         drawing.Figure5Drawing().result()
+
+
+def test_the_drawing_process_holds_a_cpu_while_it_runs(monkeypatch):
+    # Two CPUs: while Figure 5 is drawn beside it, this process reads alone,
+    # rather than three processes sharing two CPUs.
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    assert threading.active_count() == 1, "another thread runs: nothing would be forked"
+    parent = os.getpid()
+    assert parallel.cpus() == 2
+    with drawing.started() as figure5:
+        assert parallel.cpus() == 1
+        sizes = [parallel.MIN_BYTES] * 4
+        read_meanwhile = parallel.map_sized(lambda n: os.getpid(), list(range(4)), sizes)
+        assert read_meanwhile == [parent] * 4
+        figure5.draw(HISTOGRAM)
+        assert figure5.result()[0].startswith(b"\x89PNG")
+        assert parallel.cpus() == 2  # ended: its CPU is free again
+    with drawing.started():  # a drawing not waited for frees its CPU too
+        assert parallel.cpus() == 1
+    assert parallel.cpus() == 2
+    assert no_child_left()

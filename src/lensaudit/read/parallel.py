@@ -13,7 +13,8 @@ a time. A forked process sends its results back through a pipe as
 fails is done here afterwards, where any error then shows itself.
 :func:`shares` splits items into shares of about equal size, for work done
 a share at a time. :func:`can_fork`, :func:`received` and :func:`stop` are
-the same rules and steps for a process forked otherwise.
+the same rules and steps for a process forked otherwise, which holds a CPU
+while it runs (:func:`hold`).
 """
 
 from __future__ import annotations
@@ -34,12 +35,31 @@ MIN_BYTES = 256 * 1024
 MAX_PROCESSES = 8
 
 
+#: CPUs held by processes forked to work beside this one, for as long as they
+#: run (:func:`hold`, :func:`release`): the report's drawing process, say.
+_held = [0]
+
+
 def cpus() -> int:
-    """The CPUs this process may run on."""
+    """The CPUs this process may run on, but those that processes working
+    beside it hold (one at least)."""
     try:
-        return len(os.sched_getaffinity(0))
+        count = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
-        return os.cpu_count() or 1
+        count = os.cpu_count() or 1
+    return max(count - _held[0], 1)
+
+
+def hold() -> None:
+    """A process forked to work beside this one holds a CPU until :func:`release`:
+    the work spread by :func:`map_sized` meanwhile takes one process fewer (on
+    two CPUs, none), rather than three processes sharing two CPUs."""
+    _held[0] += 1
+
+
+def release() -> None:
+    """The process of a :func:`hold` has ended: its CPU is free again."""
+    _held[0] = max(_held[0] - 1, 0)
 
 
 def shares(sizes: Sequence[int], count: int) -> list[list[int]]:

@@ -9,7 +9,9 @@ bytes and the SVG text it sends back. The process never touches a file: what
 it draws is written here. It is forked only where that is safe and pays
 (``os.fork`` exists, this process runs one thread, more than one CPU is
 available); otherwise, and when it fails, the figure is drawn here, where any
-error then shows itself.
+error then shows itself. While it runs it holds a CPU
+(:func:`lensaudit.read.parallel.hold`): on two CPUs, this process then reads
+the database alone, rather than three processes sharing two CPUs.
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ class Figure5Drawing:
         os.close(requests_read)
         os.close(replies_write)
         self._pid, self._requests, self._replies = pid, requests_write, replies_read
+        parallel.hold()  # the database is read beside it by this process alone (on two CPUs)
 
     def draw(self, histogram: Histogram) -> None:
         """Have Figure 5 of ``histogram`` drawn (see :meth:`result`)."""
@@ -95,6 +98,7 @@ class Figure5Drawing:
             self._replies = None  # closed by _collect
             drawn = _collect(pid, replies)
             self._pid = None  # ended: _collect waited for it (else stop() ends it)
+            parallel.release()
         return drawn if drawn is not None else draw(self._histogram)
 
     def stop(self) -> None:
@@ -104,6 +108,7 @@ class Figure5Drawing:
         if self._pid is not None:
             parallel.stop(self._pid, *descriptors)
             self._pid = None
+            parallel.release()
         else:
             for descriptor in descriptors:
                 os.close(descriptor)
