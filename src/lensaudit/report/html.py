@@ -17,6 +17,7 @@ import re
 from html import escape
 from typing import TYPE_CHECKING, Any
 
+from ..read.records import MODEL_COEFFICIENTS
 from ..version import __version__
 from . import curves
 from .tables import TABLE1_CAPTION, TABLE1_HEADER, TABLE2_CAPTION, TABLE2_HEADER
@@ -250,13 +251,9 @@ def script_json(data: Any) -> str:
     return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
-#: The coefficients each model uses, as the entry table names them.
-_MODEL_COEFFICIENTS = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "poly5": ("k1", "k2")}
-
-
 def coefficients_text(record: dict[str, Any]) -> str:
     """ "a=0.01 b=-0.02 c=0" style text of the coefficients a model uses."""
-    names = _MODEL_COEFFICIENTS.get(record["model"], ())
+    names = MODEL_COEFFICIENTS.get(record["model"], ())
     return " ".join(f"{n}={record[n]:g}" for n in names if not math.isnan(record[n]))
 
 
