@@ -85,6 +85,21 @@ REAL_FOCAL = OTHER.replace(
 )
 
 
+CAMERA = """    <camera>
+        <maker>Nikon Corporation</maker>
+        <model>Nikon D90</model>
+        <mount>Nikon F AF</mount>
+        <cropfactor>1.523</cropfactor>
+    </camera>
+"""
+MOUNT = """    <mount>
+        <name>Nikon F AF</name>
+        <name lang="de">Nikon F AF (de)</name>
+        <compat>Nikon F</compat>
+    </mount>
+"""
+
+
 def document(*parts: str, head: str = "") -> bytes:
     return (head + '<lensdatabase version="2">\n' + "".join(parts) + "</lensdatabase>\n").encode()
 
@@ -133,12 +148,31 @@ MISLEADING = {
     "refused version": document(LENS, OTHER).replace(b'version="2"', b'version="3"'),
     "refused root": b"<maker>\n" + (LENS + OTHER).encode() + b"</maker>\n",
     "byte-order mark": b"\xef\xbb\xbf" + document(LENS, OTHER),
+    "comments between": document(MOUNT, "<!-- a -->\n", CAMERA, "  <!--b-->  <!---->", LENS),
+    "comment with --": document(LENS, "<!-- a -- b -->\n", OTHER),
+    "comment ends --->": document(LENS, "<!-- a --->\n", OTHER),
+    "comment not UTF-8": document(LENS, "<!-- \xef -->\n", OTHER).replace("\xef".encode(), b"\xef"),
+    "comment with a control character": document(LENS, "<!-- \x01 -->\n", OTHER),
+    "text between": document(LENS, "text\n", CAMERA, OTHER),
+    "entity between": document(LENS, "&amp;\n", OTHER),
+    "unknown entity between": document(LENS, "&bogus;\n", OTHER),
+    "instruction between": document(LENS, "<?pi x?>\n", OTHER),
+    "element between": document(LENS, "<bogus/>\n", OTHER),
+    "element before": document("<bogus/>\n", LENS, OTHER),
+    "comment before, text after": document("<!-- a -->", MOUNT, LENS, "text"),
+    "all in one comment": document("<!--\n", LENS, OTHER, "-->\n"),
+    "pieces in a camera": document("<camera>\n", LENS, MOUNT, "</camera>\n"),
+    "a mount in a broken lens": document("<lens>\n<mount>Nikon F AF</mount>\n", MOUNT, LENS),
+    "our instruction after": document(LENS, OTHER) + b"<?lensaudit-piece?>\n",
+    "our instruction in the root": document(LENS, OTHER, "<?lensaudit-piece?>"),
+    "camera refused": document(CAMERA.replace("<maker>", "<bogus/><maker>", 1), LENS),
+    "mount end tag with space": document(MOUNT.replace("</mount>", "</mount >"), CAMERA),
 }
 
 
 @pytest.mark.parametrize("name", sorted(MISLEADING))
 def test_misleading_documents_read_with_the_memo_as_alone(name):
-    teacher = document(LENS, OTHER, REAL_FOCAL, UNICODE)
+    teacher = document(MOUNT, CAMERA, LENS, OTHER, REAL_FOCAL, UNICODE)
     contents = [teacher, MISLEADING[name], teacher, MISLEADING[name]]
     for calibrations in (False, True):
         alone, with_memo = read_both(contents, calibrations)
@@ -161,7 +195,12 @@ SNIPPETS = [
     "\r",
     "<camera>",
     "</camera>",
+    "<mount>",
+    "</mount>",
+    "<!-- x -->",
     "\xef",
+    CAMERA,
+    MOUNT,
     LENS,
 ]
 
@@ -171,7 +210,7 @@ SNIPPETS = [
     st.lists(st.tuples(st.integers(0, 10_000), st.sampled_from(SNIPPETS)), min_size=1, max_size=4)
 )
 def test_documents_spliced_anywhere_read_with_the_memo_as_alone(splices):
-    teacher = document(LENS, OTHER, REAL_FOCAL)
+    teacher = document(MOUNT, LENS, CAMERA, OTHER, REAL_FOCAL)
     text = teacher.decode()
     for position, snippet in splices:
         position %= len(text) + 1
@@ -195,6 +234,27 @@ def test_the_memo_is_used_where_it_can_be(monkeypatch):
     assert [row[0] for row in moved.distortion] == [
         row[0] for row in read.read_bytes(document("\n" * 7, OTHER, LENS), "a.xml").distortion
     ]
+
+
+def test_pieces_with_comments_between_are_read_without_the_document(monkeypatch):
+    pieces = read.Pieces()
+    teacher = document(MOUNT, CAMERA, LENS, OTHER)
+    read.read_bytes(teacher, "a.xml", pieces=pieces)
+    from lensaudit.read import xml
+
+    streamed: list[bytes] = []
+    real = xml._stream
+    monkeypatch.setattr(xml, "_stream", lambda data, *a: streamed.append(data) or real(data, *a))
+    learned: list[bytes] = []
+    monkeypatch.setattr(read.Pieces, "_learn", lambda self, kind, piece, v: learned.append(piece))
+    moved = document("\n<!-- moved -->\n", OTHER, "<!--\n-->", CAMERA, LENS, "\n", MOUNT)
+    tables = read.read_bytes(moved, "a.xml", pieces=pieces)
+    assert (learned, streamed) == ([], [])  # every piece known, the rest checked alone
+    monkeypatch.undo()
+    alone = read.read_bytes(moved, "a.xml")
+    assert tables_text(tables) == tables_text(alone)
+    camera_line = moved[: moved.index(b"<camera>")].count(b"\n") + 1
+    assert [row[0] for row in tables.cameras] == [camera_line]
 
 
 # ---------------------------------------------------------------------------

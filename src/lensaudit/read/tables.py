@@ -643,39 +643,47 @@ class FileReader:
                 lens_of[tag].append(context.index)  # type: ignore[union-attr]
 
     def _tables(self) -> tuple[list | None, ...]:
-        """Every table, in the order of :meth:`taken`: the rows (each starting
-        with a line), the lens of each row, then omitted coefficients."""
+        """Every table, in the order of :meth:`taken`: the rows that start with
+        a line, the lens of each row, then omitted coefficients."""
         return (
-            self.lenses, self.distortion, self.vignetting, self.tca,
-            self.lens_of_row, self.lens_of_vignetting, self.lens_of_tca, self.omitted,
+            self.lenses, self.distortion, self.vignetting, self.tca, self.cameras,
+            self.mount_names, self.lens_of_row, self.lens_of_vignetting, self.lens_of_tca,
+            self.omitted,
         )  # fmt: skip
 
     def taken(self) -> tuple | None:
-        """The tables read so far, for :meth:`extend` into another reader; None
-        if a row is not ``ok`` (its message may name a line) or liblensfun
-        refuses what was read."""
+        """The tables read so far, for :meth:`extend` into another reader, as
+        (position in :meth:`_tables`, rows) of each that holds any; None if a
+        row is not ``ok`` (its message may name a line) or liblensfun refuses
+        what was read."""
         tables = self._tables()
         if (
             self.refusal is not None
             or any(row[_LENS_PROBLEM] for row in self.lenses)
             or any(row[-2] != STATUS_OK for rows in tables[1:4] if rows for row in rows)
-            or any(None in lens_of for lens_of in tables[4:7] if lens_of)
+            or any(None in lens_of for lens_of in tables[6:9] if lens_of)
         ):
             return None
-        return tables
+        return tuple((position, rows) for position, rows in enumerate(tables) if rows)
 
     def extend(self, taken: tuple, line: int) -> None:
         """Add what another reader read (:meth:`taken`), its lines counted from
         ``line`` and its lenses after this reader's."""
         first = len(self.lenses)
         tables = self._tables()
-        for table, rows in zip(tables[:4], taken[:4], strict=True):
-            if table is not None:
-                table += [(row[0] + line, *row[1:]) for row in rows]
-        for table, indices in zip(tables[4:7], taken[4:7], strict=True):
-            if table is not None:
-                table += [index + first for index in indices]
-        self.omitted += taken[7]
+        for position, rows in taken:
+            table = tables[position]
+            if position < _FIRST_LENS_OF:
+                table += [(row[0] + line, *row[1:]) for row in rows]  # type: ignore[operator]
+            elif position < _OMITTED:
+                table += [index + first for index in rows]  # type: ignore[operator]
+            else:
+                table += rows  # type: ignore[operator]
+
+
+#: Positions in :meth:`FileReader._tables`: the first table of the lens of each
+#: row, and the omitted coefficients.
+_FIRST_LENS_OF, _OMITTED = 6, 9
 
 
 #: Where a lens row (see :func:`read_lens`) says why its entries cannot be audited,

@@ -194,17 +194,15 @@ def _judge_root(root: Any, visiting: Any, lines: _Lines | None) -> None:
 
 
 class Pieces:
-    """The top-level ``<lens>`` elements met so far, by their bytes: for reading
-    many versions of the same files in one run (``lensaudit history``), where
-    nearly every lens of a version is one of an earlier version, often on
-    other lines.
+    """The top-level ``<lens>``, ``<camera>`` and ``<mount>`` elements met so
+    far, by their bytes: for reading many versions of the same files in one
+    run (``lensaudit history``), where nearly every piece of a version is one
+    of an earlier version, often on other lines.
 
-    A document is parsed with each lens met before (or, met for the first
-    time, parsed alone into its own document) replaced by a processing
-    instruction that holds its number and as many line breaks; the visitor
-    is handed the lens's tables where the instruction is found, moved to
-    its line (``taken()`` and ``extend(found, line)`` of
-    :class:`~lensaudit.read.tables.FileReader`). This gives what parsing
+    A document is read with each piece met before (or, met for the first
+    time, parsed alone into its own document) taken as the tables it was
+    read into, moved to its line (``taken()`` and ``extend(found, line)``
+    of :class:`~lensaudit.read.tables.FileReader`). This gives what parsing
     the whole document would, because:
 
     - a piece is used only where it parsed alone, inside a root element, as
@@ -212,21 +210,28 @@ class Pieces:
       lines relative to its first, wherever it stands in a root's content,
       in any document without namespaces, entities declared, or an
       encoding other than UTF-8 (only such documents are read this way);
-    - the document parsed must be well-formed, with every instruction put
-      in found in order as a child of the root (not inside a comment or
-      text), and the document must not hold such instructions itself; so
-      the document is well-formed with each lens in place of its
-      instruction, and every line outside the lenses is where it was.
+    - what stands around the pieces must be well-formed with each piece in
+      its place as a child of the root (not inside a comment or text), and
+      the document must not hold such instructions itself: so the document
+      is well-formed with each piece in place, and every line outside the
+      pieces is where it was. Where only white space and comments stand
+      between the pieces, that is the document with the pieces and what
+      stands between them (the comments) left out and one processing
+      instruction in their place, which must be a child of the root beside
+      comments only; elsewhere it is the document with each piece replaced
+      by a processing instruction that holds its number and as many line
+      breaks, each of which must be found, in order, as a child of the root.
 
     Anything else, an error included, is parsed again whole, so messages
-    and positions are those of the document itself. Only lenses whose every
+    and positions are those of the document itself. Only pieces whose every
     row is ``ok`` are kept (a message may name a line). Bounded: everything
-    is forgotten past :attr:`MAX_BYTES` of lenses kept.
+    is forgotten past :attr:`MAX_BYTES` of pieces kept.
     """
 
     MAX_BYTES = 64 << 20
 
     def __init__(self) -> None:
+        #: (kind, bytes) -> (tables, line breaks) of a piece, or _UNUSABLE.
         self._known: dict[tuple[Any, bytes], Any] = {}
         self._size = 0
 
@@ -243,32 +248,48 @@ class Pieces:
 
     def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
         """(root, visitor) of a document read this way; None where it cannot be."""
-        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
-
         kind = getattr(visitor(), "kind", None)
+        known, between = self._known, _BETWEEN.fullmatch
         parts: list[bytes] = []
         placed: list[tuple[int, Any]] = []
-        position, line = 0, 1
-        for start, end in _lens_spans(data):
+        comments: list[bytes] = []  # what stands between the pieces, if only that
+        position, line, first = 0, 1, -1
+        for start, end in _piece_spans(data):
             piece = data[start:end]
-            found = self._known.get((kind, piece))
+            found = known.get((kind, piece))
             if found is None:
                 found = self._learn(kind, piece, visitor)
             if found is _UNUSABLE:
                 continue
+            if first < 0:
+                first = start
+            elif comments is not None:
+                if between(data, position, start) is None:
+                    comments = None
+                elif b"<" in data[position:start]:
+                    comments.append(data[position:start])
             line += data.count(b"\n", position, start)
-            breaks = piece.count(b"\n")
+            tables, breaks = found
             parts += (data[position:start], b"<?%s %d%s?>" % (_PLACE, len(placed), b"\n" * breaks))
-            placed.append((line, found))
+            placed.append((line, tables))
             line += breaks
             position = end
         if not placed:
             return None
         parts.append(data[position:])
         visiting = visitor()
-        placing = _Placing(visiting, placed)
         document = b"".join(parts)
         _show_document(document, visiting)
+        if comments is not None:
+            outside = data[:first] + b"<?%s?>" % _PLACE + b"".join(comments) + data[position:]
+            root = _alone_in_root(outside)
+            if root is not None:
+                for line, tables in placed:
+                    visiting.extend(tables, line)
+                return root, visiting
+        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+        placing = _Placing(visiting, placed)
         try:
             root = _stream(document, placing, None)
         except etree.XMLSyntaxError:
@@ -276,8 +297,8 @@ class Pieces:
         return (root, visiting) if placing.complete() else None
 
     def _learn(self, kind: Any, piece: bytes, visitor: Callable[[], V]) -> Any:
-        """The tables of a lens met for the first time, parsed alone, kept; or
-        :data:`_UNUSABLE`."""
+        """(tables, line breaks) of a piece met for the first time, parsed
+        alone, kept; or :data:`_UNUSABLE`."""
         from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
         found = _UNUSABLE
@@ -286,13 +307,14 @@ class Pieces:
             root = etree.fromstring(b"<lensdatabase>" + piece + b"</lensdatabase>", parser())
         except etree.XMLSyntaxError:
             root = None
-        # The bytes start with "<lens" and end with ">": one child, one element.
+        # The bytes start with "<lens" (or "<camera", "<mount") and end with ">":
+        # one child, one element.
         if root is not None and len(root) == 1:
             visiting = visitor()
             visiting.add(root[0], _relative_line)
             taken = visiting.taken()  # type: ignore[attr-defined]
             if taken is not None:
-                found = taken
+                found = (taken, piece.count(b"\n"))
         if self._size + len(piece) > self.MAX_BYTES:
             self._known.clear()
             self._size = 0
@@ -301,30 +323,61 @@ class Pieces:
         return found
 
 
-#: What :class:`Pieces` keeps of a lens it cannot use.
+#: What :class:`Pieces` keeps of a piece it cannot use.
 _UNUSABLE = object()
-#: The target of the processing instruction that stands for a lens (see :class:`Pieces`).
+#: The target of the processing instruction that stands for a piece (see :class:`Pieces`).
 _PLACE = b"lensaudit-piece"
-_LENS_END = re.compile(rb"</lens\s*>")
+#: The start tag of a piece (see :class:`Pieces`), and the end tag of each kind.
+_PIECE_START = re.compile(rb"<(lens|camera|mount)[ \t\n>]")
+_PIECE_END = {
+    name: (b"</" + name, re.compile(rb"</" + name + rb"\s*>"))
+    for name in (b"lens", b"camera", b"mount")
+}
+#: What may stand between two pieces for the document to be checked without
+#: them: white space and comments (whose characters libxml2 then judges).
+#: Each byte can be matched one way only: no backtracking to speak of.
+_BETWEEN = re.compile(rb"(?:[ \t\n]|<!--(?:[^-]|-[^-])*-->)*")
 
 
-def _lens_spans(data: bytes) -> Iterator[tuple[int, int]]:
-    """(start, end) of each lens element, from its start tag to the first end
-    tag of a lens after it: a guess (inside a comment, nested ...), which
+def _piece_spans(data: bytes) -> Iterator[tuple[int, int]]:
+    """(start, end) of each piece, from its start tag to the first end tag of
+    its kind after it: a guess (inside a comment, nested ...), which
     :class:`Pieces` checks."""
-    find, match = data.find, _LENS_END.match
-    start = find(b"<lens")
-    while start >= 0:
-        if data[start + 5 : start + 6] in (b">", b" ", b"\t", b"\n"):
-            end = find(b"</lens", start)
-            if end < 0:
-                return
-            found = match(data, end)
-            if found is not None:
-                yield start, found.end()
-                start = find(b"<lens", found.end())
-                continue
-        start = find(b"<lens", start + 5)
+    find, search = data.find, _PIECE_START.search
+    found = search(data)
+    while found is not None:
+        start = found.start()
+        end_tag, end_match = _PIECE_END[found[1]]
+        end = find(end_tag, start)
+        if end < 0:
+            found = search(data, start + 4)
+            continue
+        closed = end_match.match(data, end)
+        if closed is not None:
+            yield start, closed.end()
+            found = search(data, closed.end())
+        else:
+            found = search(data, start + 4)
+
+
+def _alone_in_root(data: bytes) -> Any:
+    """The root of a document whose root holds nothing but one processing
+    instruction of :data:`_PLACE` and comments; None if it is not such a
+    well-formed document."""
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+    try:
+        root = etree.fromstring(data, parser())
+    except etree.XMLSyntaxError:
+        return None
+    place = _PLACE.decode()
+    kinds = [
+        "place" if getattr(child, "target", None) == place and not child.text
+        else "comment" if child.tag is etree.Comment
+        else "other"
+        for child in root
+    ]  # fmt: skip
+    return root if kinds.count("place") == 1 and "other" not in kinds else None
 
 
 _ENCODING = re.compile(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([^\"']*)[\"']")
@@ -342,7 +395,7 @@ def _relative_line(element: Any) -> int:
 
 
 class _Placing:
-    """A visitor that hands the lenses :class:`Pieces` put in place of their
+    """A visitor that hands the pieces :class:`Pieces` put in place of their
     instructions to another, checking that each is found once, in order."""
 
     def __init__(self, visiting: Any, placed: list[tuple[int, Any]]) -> None:
