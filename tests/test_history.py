@@ -24,7 +24,7 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
 
-from conftest import FOLDING_LENS, git_repository
+from conftest import FOLDING_LENS, git_repository, no_child_left
 from damage import FLIPS, flipped
 from lensaudit import read
 from lensaudit.cli import main
@@ -718,9 +718,33 @@ def test_cli_draws_the_figures_again_when_the_history_changes(repo, tmp_path, mo
     drawn = []
     real = cli_history._draw
     monkeypatch.setattr(cli_history, "_draw", lambda *a: drawn.append(1) or real(*a))
+    monkeypatch.setattr(read.parallel, "can_fork", lambda: False)  # drawn here, counted
     older = ["--rev", repo.commits["c4"]]
     assert CliRunner().invoke(main, [*args, *older]).exit_code == 0
     assert drawn == [1]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this system")
+def test_cli_trend_figures_are_drawn_beside_as_here(repo, tmp_path, monkeypatch):
+    from lensaudit.cli import history as cli_history
+
+    monkeypatch.setattr(read.parallel, "cpus", lambda: 2)
+    args = ["history", str(repo.path), "--no-cache", "-q", "-o"]
+    assert CliRunner().invoke(main, [*args, str(tmp_path / "beside")]).exit_code == 0
+    with monkeypatch.context() as here:
+        here.setattr(read.parallel, "can_fork", lambda: False)
+        assert CliRunner().invoke(main, [*args, str(tmp_path / "here")]).exit_code == 0
+    png = (tmp_path / "here" / "trend.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "beside" / "trend.png").read_bytes() == png
+    # And they are drawn beside: by another process.
+    monkeypatch.setattr(
+        cli_history, "_draw", lambda *a: dict.fromkeys(cli_history._FIGURES, b"%d" % os.getpid())
+    )
+    assert CliRunner().invoke(main, [*args, str(tmp_path / "pid")]).exit_code == 0
+    drawn_by = (tmp_path / "pid" / "trend.png").read_bytes()
+    assert drawn_by.isdigit() and drawn_by != b"%d" % os.getpid()
+    assert no_child_left()
 
 
 def test_cli_summary_names_the_newest_revision(repo, tmp_path):
@@ -845,8 +869,11 @@ def test_trend_figure_takes_the_records_as_the_dataframe(repo):
 
 def test_the_history_command_draws_its_trend_without_pandas(repo, tmp_path):
     # pandas costs a history run a tenth of a second to import, for nothing.
+    # (Drawn in this process, not in one forked beside it, to be seen.)
     script = (
         "import sys\n"
+        "from lensaudit.read import parallel\n"
+        "parallel.can_fork = lambda: False\n"
         "from lensaudit.console import dispatch\n"
         f"status = dispatch(['history', {str(repo.path)!r}, '-o', {str(tmp_path / 'out')!r}])\n"
         "print(status, 'pandas' in sys.modules, 'matplotlib' in sys.modules)\n"

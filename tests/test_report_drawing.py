@@ -31,7 +31,7 @@ def drawn_by_pid(_: histogram.Histogram) -> tuple[bytes, str]:
 
 def test_the_forked_process_draws_what_is_drawn_here(forked):
     with drawing.started() as figure5:
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         png, svg = figure5.result()
     assert (png, svg) == drawing.draw(HISTOGRAM)
     assert png.startswith(b"\x89PNG\r\n\x1a\n") and svg.lstrip().startswith("<?xml")
@@ -41,7 +41,7 @@ def test_the_forked_process_draws_what_is_drawn_here(forked):
 def test_the_figure_is_drawn_in_the_forked_process(forked, monkeypatch):
     monkeypatch.setattr(drawing, "draw", drawn_by_pid)
     with drawing.started() as figure5:
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         png, _ = figure5.result()
     assert png != str(os.getpid()).encode()
     assert no_child_left()
@@ -57,7 +57,7 @@ def test_what_a_failing_process_had_to_draw_is_drawn_here(forked, monkeypatch):
 
     monkeypatch.setattr(drawing, "draw", fails_elsewhere)
     with drawing.started() as figure5:
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         assert figure5.result() == (str(parent).encode(), "svg")
     assert no_child_left()
 
@@ -67,7 +67,7 @@ def test_what_a_killed_process_had_to_draw_is_drawn_here(forked, monkeypatch):
     with drawing.started() as figure5:
         assert figure5._pid is not None
         os.kill(figure5._pid, 9)
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         assert figure5.result() == drawn_by_pid(HISTOGRAM)
     assert no_child_left()
 
@@ -75,7 +75,7 @@ def test_what_a_killed_process_had_to_draw_is_drawn_here(forked, monkeypatch):
 def test_a_drawing_not_waited_for_ends_its_process(forked):
     with pytest.raises(KeyError), drawing.started() as figure5:
         assert figure5._pid is not None
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         raise KeyError("the report failed before its figure was wanted")
     assert no_child_left()
 
@@ -85,7 +85,7 @@ def test_nothing_is_forked_on_one_cpu(monkeypatch):
     monkeypatch.setattr(drawing, "draw", drawn_by_pid)
     with drawing.started() as figure5:
         assert figure5._pid is None
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         assert figure5.result() == drawn_by_pid(HISTOGRAM)
 
 
@@ -118,7 +118,7 @@ def test_the_drawing_process_holds_a_cpu_while_it_runs(monkeypatch):
         sizes = [parallel.MIN_BYTES] * 4
         read_meanwhile = parallel.map_sized(lambda n: os.getpid(), list(range(4)), sizes)
         assert read_meanwhile == [parent] * 4
-        figure5.draw(HISTOGRAM)
+        figure5.send(HISTOGRAM)
         assert figure5.result()[0].startswith(b"\x89PNG")
         assert parallel.cpus() == 2  # ended: its CPU is free again
     with drawing.started():  # a drawing not waited for frees its CPU too

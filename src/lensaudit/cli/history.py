@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -11,6 +12,7 @@ import click
 from ..commands import cycle_collector_off, refuse_writing_inputs
 from ..history import HistoryError, audit_history, trend_figure
 from ..history.index import caches, key_of
+from ..read import parallel
 from ..read.paths import enclosing_database
 from ..writing import OutputSet
 from .options import cache_option, fail
@@ -100,8 +102,10 @@ def history(
         fail(f"cannot create {output_dir}: {error.strerror or error}")
     # --cache-dir has named the directory by now, as $LENSAUDIT_CACHE_DIR does.
     bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
-    # What the history allocates (the summary of every file version) lives until it ends.
-    with cycle_collector_off():
+    # What the history allocates (the summary of every file version) lives until
+    # it ends. The trend figures are drawn by a process that imports matplotlib
+    # meanwhile (forked now: the commits and the newest files are read beside it).
+    with cycle_collector_off(), parallel.Beside(_drawn, _import_matplotlib) as trend:
         try:
             result = audit_history(
                 repository,
@@ -120,7 +124,7 @@ def history(
         for warning in result.warnings:
             click.echo(f"lensaudit: warning: {warning}", err=True)
 
-        written = _write_outputs(result, output_dir, cache)
+        written = _write_outputs(result, output_dir, cache, trend)
     if not quiet:
         _print_summary(result, written)
 
@@ -159,23 +163,30 @@ class _ProgressBar:
             self.bar = None
 
 
-def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
-    """Write history.csv, introduced.csv, events.csv and the trend figures: all, or none."""
+def _write_outputs(
+    result, output_dir: Path, cache: bool | Path, trend: parallel.Beside
+) -> list[Path]:
+    """Write history.csv, introduced.csv, events.csv and the trend figures: all,
+    or none. The figures are drawn by ``trend`` (see :func:`_figures`) while
+    the other files are made."""
     contents: dict[str, str | bytes] = {}
+    history_csv = io.StringIO()
+    result.write_csv(history_csv)
+    contents["history.csv"] = history_csv.getvalue()
+    mode = "first-parent line" if result.first_parent else "all commits"
+    title = (
+        f"{result.path} of {result.repository.resolve().name} "
+        f"({mode}) up to {result.newest.date[:10]}"
+    )
+    figures = _figures(result, title, contents["history.csv"], cache, trend)
     for name, write in (
-        ("history.csv", result.write_csv),
         ("introduced.csv", result.write_introduced_csv),
         ("events.csv", result.write_events_csv),
     ):
         stream = io.StringIO()
         write(stream)
         contents[name] = stream.getvalue()
-    mode = "first-parent line" if result.first_parent else "all commits"
-    title = (
-        f"{result.path} of {result.repository.resolve().name} "
-        f"({mode}) up to {result.newest.date[:10]}"
-    )
-    contents |= _figures(result, title, contents["history.csv"], cache)  # type: ignore[arg-type]
+    contents |= figures()
     with OutputSet() as outputs:
         for name, data in contents.items():
             if isinstance(data, str):
@@ -185,11 +196,17 @@ def _write_outputs(result, output_dir: Path, cache: bool | Path) -> list[Path]:
     return [output_dir / name for name in contents]
 
 
-def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[str, bytes]:
-    """trend.png and trend.svg: drawn, or as drawn last time for the same
+_FIGURES = ("trend.png", "trend.svg")
+
+
+def _figures(
+    result, title: str, history_csv: str, cache: bool | Path, trend: parallel.Beside
+) -> Callable[[], dict[str, bytes]]:
+    """What gives trend.png and trend.svg: as drawn last time for the same
     history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
     import and to draw, and the history of an unchanged repository is the
-    same), kept in the history's index (:mod:`lensaudit.history.index`)."""
+    same), kept in the history's index (:mod:`lensaudit.history.index`), or
+    drawn by ``trend``, which is sent what to draw now."""
     # importlib.metadata: slow to import, only for provenance
     from importlib.metadata import PackageNotFoundError, version
 
@@ -199,24 +216,43 @@ def _figures(result, title: str, history_csv: str, cache: bool | Path) -> dict[s
     except PackageNotFoundError:
         matplotlib_version = ""
     key = key_of(matplotlib_version, title, history_csv)
-    names = ("trend.png", "trend.svg")
     found = index.get("trend", key) if index is not None else None
     if (
         isinstance(found, tuple)
-        and len(found) == len(names)
+        and len(found) == len(_FIGURES)
         and all(isinstance(data, bytes) for data in found)
     ):
-        return dict(zip(names, found, strict=True))
-    figures = _draw(result, title)
-    if index is not None:
-        index.put("trend", key, tuple(figures[name] for name in names))
-    return figures
+        trend.stop()
+        return lambda: dict(zip(_FIGURES, found, strict=True))
+    trend.send((result.records(), title))
+
+    def drawn() -> dict[str, bytes]:
+        figures = trend.result()
+        if index is not None:
+            index.put("trend", key, tuple(figures[name] for name in _FIGURES))
+        return figures
+
+    return drawn
 
 
-def _draw(result, title: str) -> dict[str, bytes]:
+def _import_matplotlib() -> None:
+    """What drawing the trend figures needs, imported ahead (it is slow)."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.backends.backend_svg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
+    import numpy  # noqa: F401
+
+
+def _drawn(request: tuple[list[dict], str]) -> dict[str, bytes]:
+    """trend.png and trend.svg of (history.csv's rows, title): :func:`_draw`,
+    looked up when called (it may be replaced)."""
+    return _draw(*request)
+
+
+def _draw(records: list[dict], title: str) -> dict[str, bytes]:
     """trend.png and trend.svg, drawn one after the other (the second costs a
     tenth of a second)."""
-    figure = trend_figure(result.records(), title=title)
+    figure = trend_figure(records, title=title)
     figures = {}
     for name, options in (
         ("trend.png", {"format": "png", "dpi": 150}),

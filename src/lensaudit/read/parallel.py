@@ -12,9 +12,9 @@ a time. A forked process sends its results back through a pipe as
 :mod:`marshal` data (so results must be plain data). An item whose process
 fails is done here afterwards, where any error then shows itself.
 :func:`shares` splits items into shares of about equal size, for work done
-a share at a time. :func:`can_fork`, :func:`received` and :func:`stop` are
-the same rules and steps for a process forked otherwise, which holds a CPU
-while it runs (:func:`hold`).
+a share at a time. :class:`Beside` is work done by one process forked
+ahead of it (a drawing: it imports matplotlib at once and waits for what
+to draw), with the same rules.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterator, Sequence
 # typing only for type checkers
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import Any
+    from typing import Any, NoReturn
 
 #: Below this many bytes in all, a process costs more than it saves.
 MIN_BYTES = 256 * 1024
@@ -201,3 +201,124 @@ def stop(pid: int, *descriptors: int) -> None:
         os.waitpid(pid, 0)
     except OSError:
         pass
+
+
+class Beside:
+    """``work(argument)`` done by a process forked at :meth:`start`, which
+    runs ``prepare()`` at once (an import, while this process goes on) and
+    then waits for the argument (:meth:`send`); :meth:`result` waits for
+    what it made. The process never touches a file: argument and result go
+    through pipes, pickled. It is forked only where that is safe and pays
+    (:func:`can_fork`); otherwise, and when it fails, the work is done here
+    by :meth:`result`, where any error then shows itself. With ``hold``, the
+    process holds a CPU (:func:`hold`) from :meth:`start` until it ends, as
+    one that works while this one spreads work over the CPUs. As a context
+    manager, it is started by ``with`` and stopped at the end of the block."""
+
+    #: Bytes of the length that comes before the argument sent.
+    LENGTH_BYTES = 8
+
+    def __init__(
+        self,
+        work: Callable[[Any], Any],
+        prepare: Callable[[], object] | None = None,
+        hold: bool = False,
+    ) -> None:
+        self._work, self._prepare, self._hold = work, prepare, hold
+        self._pid: int | None = None
+        self._requests: int | None = None  # write end: the argument, to the process
+        self._replies: int | None = None  # read end: what the process made
+        self._argument: tuple[Any] | None = None
+        self._started = False
+
+    def start(self) -> Beside:
+        """Fork the process, where one may be (once: again, nothing); this object."""
+        if not self._started and can_fork():
+            requests_read, requests_write = os.pipe()
+            replies_read, replies_write = os.pipe()
+            pid = os.fork()
+            if pid == 0:
+                os.close(requests_write)
+                os.close(replies_read)
+                self._serve(requests_read, replies_write)
+            os.close(requests_read)
+            os.close(replies_write)
+            self._pid, self._requests, self._replies = pid, requests_write, replies_read
+            if self._hold:
+                hold()
+        self._started = True
+        return self
+
+    def send(self, argument: Any) -> None:
+        """Have ``work(argument)`` done (see :meth:`result`)."""
+        self._argument = (argument,)
+        descriptor, self._requests = self._requests, None
+        if descriptor is None:
+            return
+        import pickle  # only where a process is forked
+
+        request = pickle.dumps(argument)
+        try:
+            with open(descriptor, "wb", closefd=True) as stream:
+                stream.write(len(request).to_bytes(self.LENGTH_BYTES, "little") + request)
+        except OSError:  # the process is gone: done here
+            self.stop()
+
+    def result(self) -> Any:
+        """``work(argument)`` of the argument given to :meth:`send`."""
+        if self._argument is None:
+            raise RuntimeError("Beside.result() before send()")
+        pid, replies = self._pid, self._replies
+        if pid is not None and replies is not None:
+            self._replies = None  # closed by received()
+            reply = received(pid, replies)
+            self._pid = None  # ended: received() waited for it
+            if self._hold:
+                release()
+            if reply is not None:
+                import pickle  # only where a process is forked
+
+                try:
+                    return pickle.loads(reply)[0]
+                except (pickle.UnpicklingError, EOFError, ValueError, TypeError, IndexError):
+                    pass
+        return self._work(self._argument[0])
+
+    def stop(self) -> None:
+        """End the process, if there is one still: its work is no longer wanted."""
+        descriptors = [d for d in (self._requests, self._replies) if d is not None]
+        self._requests = self._replies = None
+        if self._pid is not None:
+            stop(self._pid, *descriptors)
+            self._pid = None
+            if self._hold:
+                release()
+        else:
+            for descriptor in descriptors:
+                os.close(descriptor)
+
+    def __enter__(self) -> Beside:
+        return self.start()
+
+    def __exit__(self, *_: object) -> None:
+        self.stop()
+
+    def _serve(self, requests: int, replies: int) -> NoReturn:
+        """The forked process: prepare, do the work asked for, send back what it
+        made; leave without the parent's cleanup."""
+        code = 1
+        try:
+            import pickle
+
+            if self._prepare is not None:
+                self._prepare()
+            with open(requests, "rb", closefd=True) as stream:
+                length = int.from_bytes(stream.read(self.LENGTH_BYTES), "little")
+                request = stream.read(length)
+            if length and len(request) == length:
+                reply = pickle.dumps((self._work(pickle.loads(request)),))
+                with open(replies, "wb", closefd=True) as stream:
+                    stream.write(reply)
+                code = 0
+        finally:
+            os._exit(code)

@@ -129,7 +129,7 @@ def write_report(
     fig5 = histogram.figure5(audit)
     if drawing is None:
         drawing = Figure5Drawing()
-    drawing.draw(fig5)
+    drawing.send(fig5)
     comparison = None
     if paper_values is not None:
         from . import paper  # numpy: `report --help` (this package) imports no heavy module
