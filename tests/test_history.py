@@ -26,6 +26,7 @@ from hypothesis import given, settings
 
 from conftest import FOLDING_LENS, git_repository, no_child_left
 from damage import FLIPS, flipped
+from history_blobs import file_versions
 from lensaudit import read
 from lensaudit.cli import main
 from lensaudit.history import (
@@ -39,6 +40,7 @@ from lensaudit.history import (
     trend_figure,
 )
 from lensaudit.history import versions as versions_stage
+from lensaudit.pipeline import file_metrics
 
 # The shared data directory beside the project's checkout.
 BUNDLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "lensfun-db-history.bundle"
@@ -448,9 +450,18 @@ def csv_text(result) -> tuple[str, str]:
 
 def count_reads(monkeypatch) -> list[bytes]:
     """The contents the history hands to the reader, as it reads them (in this
-    process: the small repository is read without worker processes)."""
+    process: the small repository is read without worker processes); one read
+    piece by piece counts where the reader reads it so, else as it is read then."""
     calls: list[bytes] = []
-    real_bytes, real_contents = read.read_bytes, read.read_contents
+    real_bytes, real_contents, real_pieces = read.read_bytes, read.read_contents, read.read_pieces
+
+    def pieces(data: bytes, *a, **k):
+        found = real_pieces(data, *a, **k)
+        if found is not None:
+            calls.append(data)
+        return found
+
+    monkeypatch.setattr(read, "read_pieces", pieces)
     monkeypatch.setattr(
         read, "read_bytes", lambda data, *a, **k: calls.append(data) or real_bytes(data, *a, **k)
     )
@@ -491,10 +502,19 @@ def test_file_versions_are_kept_in_the_one_cache_by_content(repo, tmp_path):
 
 
 def count_parses(monkeypatch) -> list[int]:
-    """One item for each time the reader's parser runs (in this process)."""
+    """One item for each time the reader's parser runs (in this process): a
+    content read piece by piece counts where it is read so."""
     parsed: list[int] = []
-    real = read.xml.parse
+    real, real_pieces = read.xml.parse, read.xml.read_pieces
+
+    def pieces(*a, **k):
+        found = real_pieces(*a, **k)
+        if found is not None:
+            parsed.append(1)
+        return found
+
     monkeypatch.setattr(read.xml, "parse", lambda *a, **k: parsed.append(1) or real(*a, **k))
+    monkeypatch.setattr(read.xml, "read_pieces", pieces)
     return parsed
 
 
@@ -962,7 +982,7 @@ def test_introducing_commits_hold_the_entry_and_their_parents_do_not(lensfun_his
 
 
 def test_a_version_summary_counts_what_a_scan_finds(bundled_db):
-    from lensaudit.pipeline import file_metrics, run
+    from lensaudit.pipeline import run
 
     for path in sorted(bundled_db.glob("*.xml"))[:12]:
         tables = read.read_bytes(path.read_bytes(), path.name)
@@ -990,6 +1010,50 @@ def test_a_version_summary_counts_what_a_scan_finds(bundled_db):
         assert summary.identities == [entry_identity(e) for e in audited]
 
 
+def summaries_by_piece(contents: list[bytes]) -> tuple[int, list[int]]:
+    """How many contents the history summarizes piece by piece, and those whose
+    summary then differs from the summary of the whole file."""
+    pieces, memo, solved = read.Pieces(), {}, {}
+    by_pieces, wrong = 0, []
+    for number, data in enumerate(contents):
+        tables = read.read_bytes(data, "f.xml")
+        whole = versions_stage.summarize(tables, file_metrics(tables, None))
+        rows = read.read_pieces(data, pieces)
+        if rows is None:
+            read.read_bytes(data, "f.xml", pieces=pieces)  # learns its pieces, as the history
+            continue
+        by_pieces += 1
+        if versions_stage._pieces_summary(rows, memo, solved) != whole:
+            wrong.append(number)
+    return by_pieces, wrong
+
+
+def test_real_versions_summarized_by_piece_as_whole(tmp_path):
+    by_pieces, wrong = summaries_by_piece(file_versions(tmp_path, revisions=40))
+    assert wrong == []
+    assert by_pieces > 200
+
+
+def test_folding_entries_summarized_by_piece_as_whole():
+    lens = FOLDING_LENS.split("<lens>", 1)[1].rsplit("</lens>", 1)[0]
+    other = lens.replace("Test 10mm", "Other 10mm").replace('k1="-0.11"', 'k1="-0.01"')
+    two = lens.replace("Test 10mm", "Two 10mm").replace(
+        '<distortion model="poly3" focal="16" k1="-0.11"/>',
+        '<distortion model="poly3" focal="12" k1="-0.01"/>'
+        '<distortion model="poly3" focal="16" k1="-0.11"/>',
+    )
+    pieces = [f"<lens>{text}</lens>\n" for text in (lens, other, two, lens)]
+    contents = [
+        f'<lensdatabase version="2">\n{"".join(order)}</lensdatabase>\n'.encode()
+        for order in (pieces, pieces[::-1], pieces[1:], pieces[2:] + pieces[:1])
+    ]
+    by_pieces, wrong = summaries_by_piece(contents)
+    assert (by_pieces, wrong) == (len(contents), [])
+    tables = read.read_bytes(contents[0], "f.xml")
+    summary = versions_stage.summarize(tables, file_metrics(tables, None))
+    assert summary.folding == (0, 3, 4)  # each fold found, at its place
+
+
 def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_path):
     """The command, a fresh process, reads file versions on every core (forked
     processes); the library gives the same here."""
@@ -1012,11 +1076,22 @@ def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_
         assert (tmp_path / "forked" / name).read_text(encoding="utf-8") == stream.getvalue()
 
 
-def test_progress_reaches_every_file_version_read(repo):
+def test_progress_reaches_every_file_version_read(repo, tmp_path):
     seen = []
-    result = audit_history(repo.path, progress=lambda done, total: seen.append((done, total)))
+    result = audit_history(
+        repo.path, cache=tmp_path, progress=lambda done, total: seen.append((done, total))
+    )
     assert seen and seen[-1] == (result.blobs_read, result.blobs_read)
     assert [done for done, _ in seen] == sorted(done for done, _ in seen)
+    # Another run of the same versions: all but the newest taken from the index.
+    seen.clear()
+    again = audit_history(
+        repo.path,
+        cache=tmp_path,
+        since="2000-01-01",
+        progress=lambda done, total: seen.append((done, total)),
+    )
+    assert again.blobs_reused > 0 and seen[-1] == (again.blobs, again.blobs)
 
 
 # ------------------------------------------------------------------ fold events

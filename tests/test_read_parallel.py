@@ -183,6 +183,20 @@ def test_meanwhile_is_done_here_once_while_the_others_take_items(forced, tmp_pat
     assert {pid for _, pid in found} != {parent}  # taken elsewhere while this one waited
 
 
+def test_the_cpus_of_the_others_are_held_meanwhile(monkeypatch):
+    # Work spread over the CPUs meanwhile (the history reads its newest files
+    # so) is spread over those the others do not take.
+    monkeypatch.setattr(parallel, "MIN_BYTES", 0)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2}, raising=False)
+    assert parallel.cpus() == 3
+    seen = []
+    found = map_sized(lambda n: n, list(range(6)), [1] * 6, lambda: seen.append(parallel.cpus()))
+    assert (found, seen, parallel.cpus()) == (list(range(6)), [1], 3)
+    with pytest.raises(KeyError):  # freed when meanwhile fails too
+        map_sized(lambda n: n, list(range(6)), [1] * 6, lambda: {}["x"])
+    assert parallel.cpus() == 3
+
+
 def test_meanwhile_is_done_when_nothing_is_forked(one_cpu, tmp_path):
     done = []
     assert map_sized(lambda n: n + 1, [1, 2], [1, 1], lambda: done.append(1)) == [2, 3]

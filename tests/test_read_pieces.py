@@ -50,6 +50,31 @@ def test_real_file_versions_read_with_the_memo_as_alone(tmp_path):
     assert with_memo == alone
 
 
+def pieces_as_whole(contents: list[bytes]) -> tuple[int, list[str]]:
+    """How many contents read_pieces reads, and where what it reads differs
+    from read_bytes: its pieces' rows one after the other, each at its line."""
+    pieces, by_pieces = read.Pieces(), 0
+    wrong = []
+    for number, data in enumerate(contents):
+        by_piece = read.read_pieces(data, pieces)
+        if by_piece is None:
+            read.read_bytes(data, "f.xml", pieces=pieces)  # learns the pieces as history does
+            continue
+        by_pieces += 1
+        whole = read.read_bytes(data, "f.xml")
+        rows = [row[1:] for rows in by_piece for row in rows]
+        if whole.status != "ok" or rows != [row[1:] for row in whole.distortion]:
+            wrong.append(f"content {number}")
+    return by_pieces, wrong
+
+
+def test_real_file_versions_read_by_piece_as_whole(tmp_path):
+    versions = file_versions(tmp_path, revisions=40)
+    by_pieces, wrong = pieces_as_whole(versions)
+    assert wrong == []
+    assert by_pieces > 0.8 * len(versions)  # nearly all are read so
+
+
 def test_what_liblensfun_refuses_is_judged_only_when_asked_for(tmp_path):
     data = (
         b'<lensdatabase version="2"><lens><maker>A</maker><model>B</model>'
@@ -177,6 +202,7 @@ def test_misleading_documents_read_with_the_memo_as_alone(name):
     for calibrations in (False, True):
         alone, with_memo = read_both(contents, calibrations)
         assert with_memo == alone
+    assert pieces_as_whole(contents)[1] == []
 
 
 SNIPPETS = [
@@ -215,8 +241,10 @@ def test_documents_spliced_anywhere_read_with_the_memo_as_alone(splices):
     for position, snippet in splices:
         position %= len(text) + 1
         text = text[:position] + snippet + text[position:]
-    alone, with_memo = read_both([teacher, text.encode(), text.encode("latin-1", "replace")])
+    contents = [teacher, text.encode(), text.encode("latin-1", "replace")]
+    alone, with_memo = read_both(contents)
     assert with_memo == alone
+    assert pieces_as_whole(contents)[1] == []
 
 
 def test_the_memo_is_used_where_it_can_be(monkeypatch):

@@ -248,18 +248,29 @@ def _read_versions(
     names.update((blob, name) for name, blob in newest_files.items())
     interner = Interner()
     kept = audits_kept(index, interner)
-    full = _read_in_full(git, sorted(set(newest_files.values())), names, store)
-    audits = {blob: interner.audit(*versions.summarize(*found)) for blob, found in full.items()}
-    reused = [blob for blob in every_blob if blob in kept and blob not in full]
-    audits.update((blob, kept[blob]) for blob in reused)
+    full_set = set(newest_files.values())
+    newest = sorted(full_set)
+    reused = [blob for blob in every_blob if blob in kept and blob not in full_set]
+    audits = {blob: kept[blob] for blob in reused}
     if progress is not None:
         progress(len(audits), len(every_blob))
+    full: dict[str, tuple[read.FileTables, dict[str, list]]] = {}
+
+    def read_newest() -> None:  # by this process, while the others read the rest
+        full.update(_read_in_full(git, newest, names, store))
+
     audits |= versions.read_versions(
         git,
-        [blob for blob in every_blob if blob not in audits],
+        [blob for blob in every_blob if blob not in audits and blob not in full_set],
         names,
         interner,
-        None if progress is None else lambda done: progress(len(full) + done, len(every_blob)),
+        None
+        if progress is None
+        else lambda done: progress(len(reused) + len(full) + done, len(every_blob)),
+        read_newest,
+    )
+    audits.update(
+        (blob, interner.audit(*versions.summarize(*found))) for blob, found in full.items()
     )
     audits = {blob: audits[blob] for blob in every_blob}
     if index is not None:

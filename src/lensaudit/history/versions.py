@@ -9,16 +9,20 @@ summaries, not the tables, are kept, in the history's index
 (:mod:`~.index`).
 
 Versions are read on every core by the reader's own mechanism
-(:func:`lensaudit.read.parallel.map_sized`), in rounds so that progress can
-be shown: each process reads its share of a round from git itself (one
-``git cat-file`` each) and sends back only summaries, each identity once
-with a number the summaries refer to (this process interns the identities
-of a share, not of every entry of every version). Nearly every lens and
-entry of a version is one of an earlier version: the reader's
-:class:`lensaudit.read.Pieces` and the solver's memo
-(:func:`lensaudit.solver.kernel.column_metrics`) skip what was met before,
-and what the first share of a round learns (it is read in this process) is
-known to the later rounds.
+(:func:`lensaudit.read.parallel.map_sized`), a file's versions by one
+process, in rounds so that progress can be shown: each process reads its
+files from git itself (one ``git cat-file`` each) and sends back only
+summaries, each identity once with a number the summaries refer to (this
+process interns the identities of a file, not of every entry of every
+version).
+
+Nearly every lens and entry of a version is one of an earlier version: the
+reader's :class:`lensaudit.read.Pieces` and the solver's memo
+(:func:`lensaudit.solver.kernel.column_metrics`) skip what was met before.
+Where the reader reads a version as nothing but such pieces
+(:func:`lensaudit.read.read_pieces`), its summary is that of each piece's
+rows, added: a summary counts each row on its own, so that is the summary
+of the rows one after the other, and each piece's is kept.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from functools import partial
 from typing import NamedTuple
 
 from .. import read
-from ..pipeline import file_metrics
+from ..pipeline import file_metrics, metric_columns, row_columns
 from ..read import parallel
 from ..read.records import MODEL_COEFFICIENTS, ROW_FIELDS, STATUS_OK, DistortionEntry
 from .audit import BlobAudit, Interner
@@ -83,7 +87,15 @@ class Summary(NamedTuple):
 def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
     """The summary of a file version from its tables and metric columns
     (:func:`lensaudit.pipeline.file_metrics`)."""
-    entries = len(tables.distortion)
+    return Summary(tables.error, *_rows_summary(tables.distortion, metrics))
+
+
+def _rows_summary(
+    rows: list[tuple], metrics: dict[str, list]
+) -> tuple[tuple[int, ...], list[tuple], tuple[int, ...]]:
+    """(counts, identities, folding) of a :class:`Summary` of distortion rows and
+    their metric columns. Each row counts on its own: the summary of rows one
+    after the other is that of each run of them, added (:func:`_added`)."""
     audited = 0
     per_model = dict.fromkeys(MODELS, 0)
     finite_per_model = dict.fromkeys(MODELS, 0)
@@ -91,7 +103,7 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
     identities = []
     folding = []
     for row, r_max, r_normalized_paper, folds_in_image in zip(
-        tables.distortion,
+        rows,
         metrics["r_max"],
         metrics["r_normalized_paper"],
         metrics["folds_in_image"],
@@ -114,7 +126,7 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
         if rectilinear and r_normalized_paper < 1:
             folds_paper_rectilinear += 1
     counts = (
-        entries,
+        len(rows),
         audited,
         *per_model.values(),
         sum(finite_per_model.values()),
@@ -123,7 +135,52 @@ def summarize(tables: read.FileTables, metrics: dict[str, list]) -> Summary:
         folds_rectilinear,
         folds_paper_rectilinear,
     )
-    return Summary(tables.error, counts, identities, tuple(folding))
+    return counts, identities, tuple(folding)
+
+
+#: The counts of a :class:`Summary` of no rows.
+_NO_COUNTS = _rows_summary([], {"r_max": [], "r_normalized_paper": [], "folds_in_image": []})[0]
+#: Pieces whose summary (:func:`_pieces_summary`) is kept at most.
+MEMO_PIECES = 1 << 16
+
+
+def _pieces_summary(
+    pieces: list[list[tuple]], memo: dict[int, tuple], solved: dict[tuple, tuple]
+) -> Summary:
+    """The summary of a file version read as pieces (:func:`lensaudit.read.read_pieces`):
+    that of each piece's rows, added, each kept in ``memo`` by its rows (the
+    same list for the same piece) and solved through the solver's memo."""
+    if len(memo) > MEMO_PIECES:
+        memo.clear()
+    parts = []
+    for rows in pieces:
+        if not rows:
+            continue
+        kept = memo.get(id(rows))
+        if kept is None:
+            part = _rows_summary(rows, metric_columns(row_columns(rows), solved))
+            memo[id(rows)] = (rows, part)  # rows kept: no other list takes their id
+        else:
+            part = kept[1]
+        parts.append(part)
+    return Summary("", *_added(parts))
+
+
+def _added(
+    parts: list[tuple[tuple[int, ...], list[tuple], tuple[int, ...]]],
+) -> tuple[tuple[int, ...], list[tuple], tuple[int, ...]]:
+    """(counts, identities, folding) of runs of rows one after the other, from
+    those of each run."""
+    if not parts:
+        return _NO_COUNTS, [], ()
+    identities: list[tuple] = []
+    folding: list[int] = []
+    for _, found, folds in parts:
+        if folds:
+            folding += [len(identities) + position for position in folds]
+        identities += found
+    counts = tuple(map(sum, zip(*[counts for counts, _, _ in parts], strict=True)))
+    return counts, identities, tuple(folding)
 
 
 def read_versions(
@@ -132,35 +189,54 @@ def read_versions(
     names: dict[str, str],
     interner: Interner,
     progress: Callable[[int], None] | None = None,
+    meanwhile: Callable[[], object] | None = None,
 ) -> dict[str, BlobAudit]:
     """The audits of file versions (``blobs``, shown as ``names``), read on
     every core, their identities interned by ``interner``. ``progress(done)``
-    is called after each round with the number read so far. Raises
+    is called after each round with the number read so far; ``meanwhile()``
+    is done by this process while the others start reading (see
+    :func:`lensaudit.read.parallel.map_sized`). Raises
     :class:`~.commits.HistoryError` when git cannot give a version."""
     sizes = []
     for blob, size in zip(blobs, git.object_sizes(blobs), strict=True):
         if size is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         sizes.append(size)
-    # Most lenses and entries of a version are an earlier version's: what the
-    # first share of each round learns (read here) is known to the next round's.
-    pieces, solved = read.Pieces(), {}
-    read_batch = partial(_read_batch, git, names, pieces, solved)
+    # Most lenses and entries of a version are an earlier version's: what this
+    # process learns in a round is known to it in the next.
+    pieces, memo, solved = read.Pieces(), {}, {}
+    read_batch = partial(_read_batch, git, names, pieces, memo, solved)
     found: dict[str, BlobAudit] = {}
     for round_blobs, round_sizes in _rounds(blobs, sizes):
-        shares = parallel.shares(round_sizes, parallel.cpus())
-        batches = [[round_blobs[index] for index in share] for share in shares]
-        batch_sizes = [sum(round_sizes[index] for index in share) for share in shares]
-        for batch, (identities, summaries) in zip(
-            batches, parallel.map_sized(read_batch, batches, batch_sizes), strict=True
-        ):
+        batches, batch_sizes = _by_file(round_blobs, round_sizes, names)
+        made = parallel.map_sized(read_batch, batches, batch_sizes, meanwhile)
+        meanwhile = None
+        for batch, (identities, summaries) in zip(batches, made, strict=True):
             numbers = list(map(interner, identities))
             for blob, (error, counts, local, folding) in zip(batch, summaries, strict=True):
                 idents = tuple(map(numbers.__getitem__, local))
                 found[blob] = BlobAudit(error, counts, idents, tuple(idents[i] for i in folding))
         if progress is not None:
             progress(len(found))
+    if meanwhile is not None:  # no round
+        meanwhile()
+        if progress is not None:
+            progress(0)
     return found
+
+
+def _by_file(
+    blobs: Sequence[str], sizes: Sequence[int], names: dict[str, str]
+) -> tuple[list[list[str]], list[int]]:
+    """``blobs`` by file, and the size of each file's: every version of a file is
+    read by one process, which then learns each of its pieces once (the memos
+    are a process's own)."""
+    files: dict[str, tuple[list[str], list[int]]] = {}
+    for blob, size in zip(blobs, sizes, strict=True):
+        versions, total = files.setdefault(names[blob], ([], [0]))
+        versions.append(blob)
+        total[0] += size
+    return [versions for versions, _ in files.values()], [t[0] for _, t in files.values()]
 
 
 def _rounds(blobs: Sequence[str], sizes: Sequence[int]) -> list[tuple[list[str], list[int]]]:
@@ -181,20 +257,26 @@ def _read_batch(
     git: Git,
     names: dict[str, str],
     pieces: read.Pieces,
+    memo: dict[int, tuple],
     solved: dict[tuple, tuple],
     batch: list[str],
 ) -> tuple[list[tuple], list]:
     """The summaries of one process's share of a round, as plain data: the
     identities met, each once, and the summaries, their identities given
-    as positions in that list. ``pieces`` and ``solved`` are the reader's
-    and the solver's memos."""
+    as positions in that list. ``pieces``, ``memo`` and ``solved`` are the
+    reader's memo, that of the summary of each piece, and the solver's."""
     known: dict[tuple, int] = {}  # identity -> its position among those met
     summaries = []
     for blob, answer in zip(batch, git.objects(batch), strict=True):
         if answer is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
-        tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
-        error, counts, identities, folding = summarize(tables, file_metrics(tables, None, solved))
+        piece_rows = read.read_pieces(answer[2], pieces)
+        if piece_rows is not None:
+            summary = _pieces_summary(piece_rows, memo, solved)
+        else:
+            tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
+            summary = summarize(tables, file_metrics(tables, None, solved))
+        error, counts, identities, folding = summary
         numbers = [known.setdefault(identity, len(known)) for identity in identities]
         summaries.append((error, counts, numbers, folding))
     return list(known), summaries

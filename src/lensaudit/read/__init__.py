@@ -31,7 +31,7 @@ from .records import (
     LoadError,
     SourceFile,
 )
-from .tables import KINDS, READ, SPECS, TCA, VIGNETTING, FileReader, error_row
+from .tables import KINDS, READ, SPECS, TCA, VIGNETTING, FileReader, distortion_of, error_row
 from .xml import Pieces
 
 __all__ = [
@@ -50,6 +50,7 @@ __all__ = [
     "read",
     "read_bytes",
     "read_contents",
+    "read_pieces",
     "read_files",
     "resolve",
 ]
@@ -158,6 +159,21 @@ def read_bytes(
     caller saves the cache). With ``pieces``, lenses met before in other
     contents are not parsed again (see :class:`~lensaudit.read.xml.Pieces`)."""
     return _tables([(data, name, path)], cache, calibrations, refusals, pieces)[0]
+
+
+def read_pieces(data: bytes, pieces: Pieces) -> list[list[tuple]] | None:
+    """The distortion rows of each top-level piece of one file's content (see
+    :class:`~lensaudit.read.xml.Pieces`), in order, where :func:`read_bytes`
+    with ``pieces`` reads the content as nothing but those pieces, with no
+    problem: its :attr:`FileTables.distortion` is then those rows one after
+    the other, each with its line counted from its piece's first (rows hold
+    their line first). None where it reads the content otherwise.
+
+    For reading many versions of the same files (``lensaudit history``),
+    where what is made of a piece's rows can be kept by piece: each piece met
+    again gives the same list object."""
+    placed = xml.read_pieces(data, partial(FileReader, False, False), pieces)
+    return None if placed is None else [distortion_of(taken) for _, taken in placed]
 
 
 def _tables(

@@ -89,7 +89,8 @@ def map_sized(
     """``[function(item) for item in items]``, spread over the CPUs, largest
     ``sizes`` first. ``meanwhile()`` (work that does not depend on the items,
     such as importing what comes next) is done here first, while the other
-    processes take items: it is not done in them."""
+    processes take items: it is not done in them, and the CPUs they take
+    are held (:func:`hold`) while it runs."""
     count = min(cpus(), MAX_PROCESSES, len(items))
     if count < 2 or sum(sizes) < MIN_BYTES or not can_fork():
         if meanwhile is not None:
@@ -102,7 +103,11 @@ def map_sized(
         for _ in range(count - 1):
             children.append(_fork(function, items, queue))
         if meanwhile is not None:
-            meanwhile()
+            _held[0] += len(children)  # their CPUs: work spread meanwhile is spread over the rest
+            try:
+                meanwhile()
+            finally:
+                _held[0] -= len(children)
         for index in queue.taken():
             results[index] = function(items[index])
         while children:

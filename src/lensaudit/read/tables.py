@@ -673,7 +673,7 @@ class FileReader:
         tables = self._tables()
         for position, rows in taken:
             table = tables[position]
-            if position < _FIRST_LENS_OF:
+            if position < _FIRST_LENS_OF:  # rows that start with a line
                 table += [(row[0] + line, *row[1:]) for row in rows]  # type: ignore[operator]
             elif position < _OMITTED:
                 table += [index + first for index in rows]  # type: ignore[operator]
@@ -681,9 +681,19 @@ class FileReader:
                 table += rows  # type: ignore[operator]
 
 
-#: Positions in :meth:`FileReader._tables`: the first table of the lens of each
-#: row, and the omitted coefficients.
-_FIRST_LENS_OF, _OMITTED = 6, 9
+#: Positions in :meth:`FileReader._tables`: the distortion rows, the first table
+#: of the lens of each row, and the omitted coefficients.
+_DISTORTION_ROWS, _FIRST_LENS_OF, _OMITTED = 1, 6, 9
+_NO_ROWS: list[tuple] = []
+
+
+def distortion_of(taken: tuple) -> list[tuple]:
+    """The distortion rows of what :meth:`FileReader.taken` gave (the same list
+    each time; not to be changed)."""
+    for position, rows in taken:
+        if position == _DISTORTION_ROWS:
+            return rows
+    return _NO_ROWS
 
 
 #: Where a lens row (see :func:`read_lens`) says why its entries cannot be audited,

@@ -165,6 +165,22 @@ def parse(
     return _checked_root(root, visiting, lines)
 
 
+def read_pieces(
+    data: bytes, visitor: Callable[[], V], pieces: Pieces
+) -> list[tuple[int, Any]] | None:
+    """How :func:`parse` with ``pieces`` reads a document where it hands the
+    visitor nothing but pieces (see :class:`Pieces`), each read as
+    ``visitor().taken()`` gives it: (line, tables) of each piece, in order.
+    None where it reads the document otherwise."""
+    if b"\r" in data:  # as parse() reads it
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    if b"&" in data and b"<!DOCTYPE" in data and unknown_reference(data) is not None:
+        return None
+    if data.count(b"\n") >= _LIBXML2_LINES or not pieces.usable(data, ()):
+        return None
+    return pieces.placed(data, visitor)
+
+
 def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed, V]:
     """What a well-formed document whose root is ``root`` is: a database or not."""
     _judge_root(root, visiting, lines)
@@ -248,12 +264,56 @@ class Pieces:
 
     def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
         """(root, visitor) of a document read this way; None where it cannot be."""
+        scanned = self._scan(data, visitor)
+        if scanned is None:
+            return None
+        placed, outside = scanned
+        visiting = visitor()
+        root = _alone_in_root(outside) if outside is not None else None
+        if root is not None:
+            for _, _, line, tables, _ in placed:
+                visiting.extend(tables, line)
+            return root, visiting
+        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+        parts: list[bytes] = []
+        position = 0
+        for number, (start, end, _, _, breaks) in enumerate(placed):
+            parts += (data[position:start], b"<?%s %d%s?>" % (_PLACE, number, b"\n" * breaks))
+            position = end
+        parts.append(data[position:])
+        document = b"".join(parts)
+        _show_document(document, visiting)
+        placing = _Placing(visiting, [(line, tables) for _, _, line, tables, _ in placed])
+        try:
+            root = _stream(document, placing, None)
+        except etree.XMLSyntaxError:
+            return None
+        return (root, visiting) if placing.complete() else None
+
+    def placed(self, data: bytes, visitor: Callable[[], V]) -> list[tuple[int, Any]] | None:
+        """(line, tables) of each piece of a document read this way where only
+        white space and comments stand between its pieces, in order (what
+        :meth:`parse` hands the visitor, and all it hands it); None otherwise."""
+        scanned = self._scan(data, visitor)
+        root = _alone_in_root(scanned[1]) if scanned is not None and scanned[1] else None
+        if root is None or root.tag != DATABASE_ROOT:  # (a problem of the file: see parse())
+            return None
+        return [(line, tables) for _, _, line, tables, _ in scanned[0]]  # type: ignore[index]
+
+    def _scan(
+        self, data: bytes, visitor: Callable[[], V]
+    ) -> tuple[list[tuple[int, int, int, Any, int]], bytes | None] | None:
+        """(start, end, line, tables, line breaks) of each piece of a document
+        that can be used, learning those met for the first time, and, where
+        only white space and comments stand between them, the document
+        without them: its pieces and what stands between them left out, one
+        processing instruction in their place. None if there is no such piece."""
         kind = getattr(visitor(), "kind", None)
         known, between = self._known, _BETWEEN.fullmatch
-        parts: list[bytes] = []
-        placed: list[tuple[int, Any]] = []
-        comments: list[bytes] = []  # what stands between the pieces, if only that
-        position, line, first = 0, 1, -1
+        placed: list[tuple[int, int, int, Any, int]] = []
+        comments: list[bytes] | None = []  # what stands between the pieces, if only that
+        position, line = 0, 1
         for start, end in _piece_spans(data):
             piece = data[start:end]
             found = known.get((kind, piece))
@@ -261,40 +321,22 @@ class Pieces:
                 found = self._learn(kind, piece, visitor)
             if found is _UNUSABLE:
                 continue
-            if first < 0:
-                first = start
-            elif comments is not None:
+            if placed and comments is not None:
                 if between(data, position, start) is None:
                     comments = None
                 elif b"<" in data[position:start]:
                     comments.append(data[position:start])
             line += data.count(b"\n", position, start)
             tables, breaks = found
-            parts += (data[position:start], b"<?%s %d%s?>" % (_PLACE, len(placed), b"\n" * breaks))
-            placed.append((line, tables))
+            placed.append((start, end, line, tables, breaks))
             line += breaks
             position = end
         if not placed:
             return None
-        parts.append(data[position:])
-        visiting = visitor()
-        document = b"".join(parts)
-        _show_document(document, visiting)
-        if comments is not None:
-            outside = data[:first] + b"<?%s?>" % _PLACE + b"".join(comments) + data[position:]
-            root = _alone_in_root(outside)
-            if root is not None:
-                for line, tables in placed:
-                    visiting.extend(tables, line)
-                return root, visiting
-        from lxml import etree  # lxml: only to parse XML, which a warm scan does not
-
-        placing = _Placing(visiting, placed)
-        try:
-            root = _stream(document, placing, None)
-        except etree.XMLSyntaxError:
-            return None
-        return (root, visiting) if placing.complete() else None
+        if comments is None:
+            return placed, None
+        outside = data[: placed[0][0]] + b"<?%s?>" % _PLACE + b"".join(comments) + data[position:]
+        return placed, outside
 
     def _learn(self, kind: Any, piece: bytes, visitor: Callable[[], V]) -> Any:
         """(tables, line breaks) of a piece met for the first time, parsed
