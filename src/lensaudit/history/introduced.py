@@ -98,19 +98,22 @@ def _next_state(
         # Most entries of a changed file are those of its previous version: looked
         # up there directly (where _find_introducer looks first), the others searched.
         known = previous.index() if previous is not None else {}
-        removed: dict[int, int] | None = None  # calibration -> introducer, of entries gone
-        introducers = []
-        for ident in audit.idents:
-            found = known.get(ident)
-            # An identity no state has held is in no parent: not searched for.
-            if found is None and ident in met:
-                found = _find_introducer(ident, path, parents)
-            if found is None and previous is not None:
-                if removed is None:
-                    removed = _removed(previous, set(audit.idents), calibration)
-                found = removed.get(calibration[ident])
-            introducers.append(index if found is None else found)
-        state[path] = _FileState(blob, audit.idents, tuple(introducers))
+        introducers = list(map(known.get, audit.idents))
+        if None in introducers:
+            removed: dict[int, int] | None = None  # calibration -> introducer, of entries gone
+            for position, ident in enumerate(audit.idents):
+                if introducers[position] is not None:
+                    continue
+                found = None
+                # An identity no state has held is in no parent: not searched for.
+                if ident in met:
+                    found = _find_introducer(ident, path, parents)
+                if found is None and previous is not None:
+                    if removed is None:
+                        removed = _removed(previous, set(audit.idents), calibration)
+                    found = removed.get(calibration[ident])
+                introducers[position] = index if found is None else found
+        state[path] = _FileState(blob, audit.idents, tuple(introducers))  # type: ignore[arg-type]
         met.update(audit.idents)
     return state
 

@@ -150,6 +150,14 @@ def _pieces_summary(
     """The summary of a file version read as pieces (:func:`lensaudit.read.read_pieces`):
     that of each piece's rows, added, each kept in ``memo`` by its rows (the
     same list for the same piece) and solved through the solver's memo."""
+    return Summary("", *_added(_piece_parts(pieces, memo, solved)))
+
+
+def _piece_parts(
+    pieces: list[list[tuple]], memo: dict[int, tuple], solved: dict[tuple, tuple]
+) -> list[tuple[tuple[int, ...], list[tuple], tuple[int, ...]]]:
+    """(counts, identities, folding) of the rows of each piece that has any (see
+    :func:`_pieces_summary`)."""
     if len(memo) > MEMO_PIECES:
         memo.clear()
     parts = []
@@ -163,17 +171,15 @@ def _pieces_summary(
         else:
             part = kept[1]
         parts.append(part)
-    return Summary("", *_added(parts))
+    return parts
 
 
-def _added(
-    parts: list[tuple[tuple[int, ...], list[tuple], tuple[int, ...]]],
-) -> tuple[tuple[int, ...], list[tuple], tuple[int, ...]]:
+def _added(parts: list[tuple[tuple[int, ...], list, tuple[int, ...]]]) -> tuple:
     """(counts, identities, folding) of runs of rows one after the other, from
-    those of each run."""
+    those of each run (their identities, or numbers that stand for them)."""
     if not parts:
         return _NO_COUNTS, [], ()
-    identities: list[tuple] = []
+    identities: list = []
     folding: list[int] = []
     for _, found, folds in parts:
         if folds:
@@ -266,17 +272,30 @@ def _read_batch(
     as positions in that list. ``pieces``, ``memo`` and ``solved`` are the
     reader's memo, that of the summary of each piece, and the solver's."""
     known: dict[tuple, int] = {}  # identity -> its position among those met
+    numbered: dict[int, tuple[list[tuple], list[int]]] = {}  # of a piece's identities
+
+    def numbers_of(identities: list[tuple]) -> list[int]:
+        found = numbered.get(id(identities))
+        if found is None or found[0] is not identities:
+            found = numbered[id(identities)] = (identities, numbers(identities))
+        return found[1]
+
+    def numbers(identities: list[tuple]) -> list[int]:
+        return [known.setdefault(identity, len(known)) for identity in identities]
+
     summaries = []
     for blob, answer in zip(batch, git.objects(batch), strict=True):
         if answer is None:
             raise HistoryError(f"git cannot read object {blob} of {git.repository}")
         piece_rows = read.read_pieces(answer[2], pieces)
         if piece_rows is not None:
-            summary = _pieces_summary(piece_rows, memo, solved)
+            parts = _piece_parts(piece_rows, memo, solved)
+            counts, local, folding = _added([(c, numbers_of(i), f) for c, i, f in parts])
+            summaries.append(("", counts, local, folding))
         else:
             tables = read.read_bytes(answer[2], names[blob], pieces=pieces)
             summary = summarize(tables, file_metrics(tables, None, solved))
-        error, counts, identities, folding = summary
-        numbers = [known.setdefault(identity, len(known)) for identity in identities]
-        summaries.append((error, counts, numbers, folding))
+            summaries.append(
+                (summary.error, summary.counts, numbers(summary.identities), summary.folding)
+            )
     return list(known), summaries
