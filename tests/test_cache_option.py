@@ -72,7 +72,7 @@ def test_history_takes_the_same_options(tmp_path):
         main, ["history", str(repository), "-o", str(out), "-q", "--cache-dir", str(cache)]
     )
     assert result.exit_code == 0, result.output
-    assert records(cache) and (cache / "history").is_file()
+    assert records(cache) and (cache / "history" / "trend").is_file()
     # --cache is a flag everywhere: what follows it is not its value.
     result = CliRunner().invoke(
         main, ["history", str(repository), "-o", str(out), "-q", "--cache", str(cache)]

@@ -540,11 +540,20 @@ def test_the_same_run_again_is_taken_from_the_index_whole(repo, tmp_path, monkey
     assert (second.newest, second.commits, second.path) == (first.newest, first.commits, first.path)
 
 
-def test_the_index_is_one_file_beside_the_records_of_the_one_cache(repo, tmp_path):
+def test_the_index_is_one_directory_beside_the_records_of_the_one_cache(repo, tmp_path):
     audit_history(repo.path, cache=tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["files", "history"]
     records = [p.name for p in (tmp_path / "files").iterdir()]
     assert records and all(name.endswith(".rec") for name in records)
+    assert sorted(p.name for p in (tmp_path / "history").iterdir()) == ["run", "versions"]
+
+
+def test_an_index_of_the_earlier_layout_is_replaced(repo, tmp_path):
+    (tmp_path / "history").write_bytes(b"lensaudit history index 1\n" + bytes(100))
+    first = audit_history(repo.path, cache=tmp_path)
+    assert (tmp_path / "history" / "run").is_file() and not first.warnings
+    again = audit_history(repo.path, cache=tmp_path)
+    assert again.blobs_read == 0 and csv_text(again) == csv_text(first)
 
 
 def test_a_run_of_another_revision_is_not_taken_from_the_cache(repo, tmp_path):
@@ -580,10 +589,13 @@ def uncached_csv(repo: Repository) -> tuple[str, str]:
 def test_a_damaged_index_gives_the_uncached_history(repo, uncached_csv, tmp_path_factory, flips):
     cache = tmp_path_factory.mktemp("cache")
     audit_history(repo.path, cache=cache)
-    original = (cache / "history").read_bytes()
-    damaged = flipped(original, flips)
-    (cache / "history").write_bytes(damaged)
-    if damaged != original:
+    changed = False
+    for entry in (cache / "history").iterdir():
+        original = entry.read_bytes()
+        damaged = flipped(original, flips)
+        entry.write_bytes(damaged)
+        changed |= damaged != original
+    if changed:
         again = audit_history(repo.path, cache=cache)
         assert csv_text(again) == uncached_csv
 
@@ -593,7 +605,7 @@ def test_a_damaged_index_gives_the_uncached_history(repo, uncached_csv, tmp_path
 def test_damaged_records_give_the_uncached_history(repo, uncached_csv, tmp_path_factory, flips):
     cache = tmp_path_factory.mktemp("cache")
     audit_history(repo.path, cache=cache)
-    (cache / "history").unlink()  # the run is made from the records
+    shutil.rmtree(cache / "history")  # the run is made from the records
     records = list(cache.glob("files/*.rec"))
     assert records
     for record in records:

@@ -10,14 +10,15 @@ and the identities of its entries, not its tables), so that a run after a
 new commit reads only the versions it adds; the last :class:`History`
 (``run``, keyed by the commit, path and selection) and the trend figures
 drawn from it (``trend``, keyed by what they show), so that the same run
-again costs one file read. It is the file ``history`` of the cache
-directory (``--cache DIR``: of DIR).
+again costs two small file reads. It is the directory ``history`` of the
+cache directory (``--cache DIR``: of DIR), a file per name, so that an
+entry is read or written without the others (the summaries are most of it).
 
-The file starts with a fixed header and the fingerprint of the code that
+A file starts with a fixed header and the fingerprint of the code that
 wrote it (:func:`fingerprint`), then the BLAKE2b digest of its body, a
-:mod:`marshal` table ``{name: (key, value)}``; a damaged, truncated or
-foreign file reads as empty. It is written whole to a temporary file and
-renamed. A file that cannot be written gives a warning, never an error.
+:mod:`marshal` pair ``(key, value)``; a damaged, truncated or foreign file
+reads as no entry. It is written whole to a temporary file and renamed. A
+file that cannot be written gives a warning, never an error.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ except ImportError:  # pragma: no cover - every CPython has _blake2
 
 #: The index's file name, in the cache directory.
 NAME = "history"
-_MAGIC = b"lensaudit history index 1\n"
+_MAGIC = b"lensaudit history index 2\n"
 _DIGEST_SIZE = 16
 #: The code that decides what a run gives, besides the reader's (which the
 #: one cache's fingerprint covers).
@@ -88,16 +89,17 @@ def caches(cache: bool | str | os.PathLike[str] | None) -> tuple[read.Cache | No
 
 
 class Index:
-    """The index file at ``path``: :meth:`get` an entry, :meth:`put` one (written
-    at once). Problems writing add a message to :attr:`warnings`."""
+    """The index directory at ``path``: :meth:`get` an entry, :meth:`put` one
+    (written at once). Problems writing add a message to :attr:`warnings`."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.warnings: list[str] = []
 
-    def _entries(self) -> dict:
+    def get(self, name: str, key: str) -> object | None:
+        """The value kept under ``name`` if it was kept for ``key``; else None."""
         try:
-            data = self.path.read_bytes()
+            data = (self.path / name).read_bytes()
             head = len(_MAGIC) + 2 * _DIGEST_SIZE
             body = memoryview(data)[head + _DIGEST_SIZE :]
             if (
@@ -106,31 +108,27 @@ class Index:
                 or data[head : head + _DIGEST_SIZE]
                 != blake2b(body, digest_size=_DIGEST_SIZE).digest()
             ):
-                return {}
-            entries = marshal.loads(body)
+                return None
+            found = marshal.loads(body)
         except _ERRORS:
-            return {}
-        return entries if isinstance(entries, dict) else {}
-
-    def get(self, name: str, key: str) -> object | None:
-        """The value kept under ``name`` if it was kept for ``key``; else None."""
-        found = self._entries().get(name)
+            return None
         if isinstance(found, tuple) and len(found) == 2 and found[0] == key:
             return found[1]
         return None
 
     def put(self, name: str, key: str, value: object) -> None:
         """Keep ``value`` (plain data) under ``name`` for ``key``, replacing what was there."""
-        entries = self._entries()
-        entries[name] = (key, value)
-        temporary = self.path.with_name(f"{self.path.name}.{os.getpid()}.tmp")
+        path = self.path / name
+        temporary = path.with_name(f"{name}.{os.getpid()}.tmp")
         try:
-            body = marshal.dumps(entries)
+            body = marshal.dumps((key, value))
             seal = blake2b(body, digest_size=_DIGEST_SIZE).digest()
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+            if self.path.is_file():  # the index of an earlier layout: one file
+                self.path.unlink()
+            self.path.mkdir(parents=True, exist_ok=True)
             with open(temporary, "wb") as stream:
                 stream.write(_MAGIC + fingerprint() + seal + body)
-            os.replace(temporary, self.path)
+            os.replace(temporary, path)
             for pattern in _LEGACY:
                 for stale in self.path.parent.glob(pattern):
                     stale.unlink(missing_ok=True)
