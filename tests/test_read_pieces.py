@@ -192,6 +192,18 @@ MISLEADING = {
     "our instruction in the root": document(LENS, OTHER, "<?lensaudit-piece?>"),
     "camera refused": document(CAMERA.replace("<maker>", "<bogus/><maker>", 1), LENS),
     "mount end tag with space": document(MOUNT.replace("</mount>", "</mount >"), CAMERA),
+    "namespace in a piece known": document(LENS, OTHER.replace("<maker>", '<maker xmlns="u">')),
+    "namespace on the root": document(LENS, OTHER).replace(
+        b"<lensdatabase ", b'<lensdatabase xmlns="urn:x" '
+    ),
+    "namespace prefix on the root": document(LENS, OTHER).replace(
+        b"<lensdatabase ", b'<lensdatabase xmlns:x="urn:x" '
+    ),
+    "our instruction in a lens": document(LENS.replace("<mount>", "<?lensaudit-piece?><mount>")),
+    "our instruction before the root": b"<?lensaudit-piece?>\n" + document(LENS, OTHER),
+    "an end tag first": b"</lens>" + document(LENS, OTHER),
+    "many lines": document(LENS, "\n" * 70_000, OTHER),
+    "many lines in a comment": document(LENS, "<!--" + "\n" * 70_000 + "-->", OTHER),
 }
 
 

@@ -173,7 +173,7 @@ def read_pieces(data: bytes, pieces: Pieces) -> list[list[tuple]] | None:
     where what is made of a piece's rows can be kept by piece: each piece met
     again gives the same list object."""
     placed = xml.read_pieces(data, partial(FileReader, False, False), pieces)
-    return None if placed is None else [distortion_of(taken) for _, taken in placed]
+    return None if placed is None else list(map(distortion_of, placed))
 
 
 def _tables(

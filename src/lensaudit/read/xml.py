@@ -21,7 +21,7 @@ from .records import STATUS_NOT_DATABASE, STATUS_OK, STATUS_XML_ERROR
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterator
+    from collections.abc import Callable
     from typing import Any, Protocol, TypeVar
 
     from lxml import etree
@@ -165,18 +165,13 @@ def parse(
     return _checked_root(root, visiting, lines)
 
 
-def read_pieces(
-    data: bytes, visitor: Callable[[], V], pieces: Pieces
-) -> list[tuple[int, Any]] | None:
-    """How :func:`parse` with ``pieces`` reads a document where it hands the
-    visitor nothing but pieces (see :class:`Pieces`), each read as
-    ``visitor().taken()`` gives it: (line, tables) of each piece, in order.
-    None where it reads the document otherwise."""
+def read_pieces(data: bytes, visitor: Callable[[], V], pieces: Pieces) -> list[Any] | None:
+    """The tables of each piece of a document that :func:`parse` with
+    ``pieces`` reads as nothing but those pieces (see :meth:`Pieces.placed`),
+    as ``visitor().taken()`` gives them, in order; None for any other."""
     if b"\r" in data:  # as parse() reads it
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
     if b"&" in data and b"<!DOCTYPE" in data and unknown_reference(data) is not None:
-        return None
-    if data.count(b"\n") >= _LIBXML2_LINES or not pieces.usable(data, ()):
         return None
     return pieces.placed(data, visitor)
 
@@ -247,27 +242,20 @@ class Pieces:
     MAX_BYTES = 64 << 20
 
     def __init__(self) -> None:
-        #: (kind, bytes) -> (tables, line breaks) of a piece, or _UNUSABLE.
-        self._known: dict[tuple[Any, bytes], Any] = {}
+        #: kind -> {bytes: (tables, line breaks) of a piece, or _UNUSABLE}.
+        self._known: dict[Any, dict[bytes, Any]] = {}
         self._size = 0
 
     def usable(self, data: bytes, read: tuple[str, ...]) -> bool:
         """Whether a document may be read this way (see above)."""
-        declared = _ENCODING.match(data)
-        return (
-            (declared is None or declared.group(1).lower() in (b"utf-8", b"utf8"))
-            and b"xmlns" not in data
-            and _PLACE not in data
-            and not _declares(data)
-            and _root_name(data) == DATABASE_ROOT
-        )
+        return b"xmlns" not in data and _PLACE not in data and _plain_prolog(data)
 
     def parse(self, data: bytes, visitor: Callable[[], V]) -> tuple[Any, V] | None:
         """(root, visitor) of a document read this way; None where it cannot be."""
         scanned = self._scan(data, visitor)
         if scanned is None:
             return None
-        placed, outside = scanned
+        placed, outside, _ = scanned
         visiting = visitor()
         root = _alone_in_root(outside) if outside is not None else None
         if root is not None:
@@ -291,40 +279,71 @@ class Pieces:
             return None
         return (root, visiting) if placing.complete() else None
 
-    def placed(self, data: bytes, visitor: Callable[[], V]) -> list[tuple[int, Any]] | None:
-        """(line, tables) of each piece of a document read this way where only
-        white space and comments stand between its pieces, in order (what
-        :meth:`parse` hands the visitor, and all it hands it); None otherwise."""
+    def placed(self, data: bytes, visitor: Callable[[], V]) -> list[Any] | None:
+        """The tables of each piece of a document (line ends normalized, no
+        reference to an unknown entity) that :func:`parse` reads as nothing
+        but those pieces, with only white space and comments between them:
+        in order, their lines counted from each piece's first; None for any
+        other document.
+
+        As :meth:`usable` and :meth:`parse` decide, with what they look for in
+        the whole document (a namespace, this class's instruction) looked for
+        only outside the pieces: no piece with a namespace is kept, and an
+        instruction of this class inside a piece, or anywhere but in the
+        root, changes nothing of what is read this way."""
+        if not _plain_prolog(data):
+            return None
         scanned = self._scan(data, visitor)
-        root = _alone_in_root(scanned[1]) if scanned is not None and scanned[1] else None
+        if scanned is None or scanned[1] is None or scanned[2] >= _LIBXML2_LINES:
+            return None
+        placed, outside, _ = scanned
+        if b"xmlns" in outside:
+            return None
+        root = _alone_in_root(outside)
         if root is None or root.tag != DATABASE_ROOT:  # (a problem of the file: see parse())
             return None
-        return [(line, tables) for _, _, line, tables, _ in scanned[0]]  # type: ignore[index]
+        return [tables for _, _, _, tables, _ in placed]
 
     def _scan(
         self, data: bytes, visitor: Callable[[], V]
-    ) -> tuple[list[tuple[int, int, int, Any, int]], bytes | None] | None:
+    ) -> tuple[list[tuple[int, int, int, Any, int]], bytes | None, int] | None:
         """(start, end, line, tables, line breaks) of each piece of a document
-        that can be used, learning those met for the first time, and, where
-        only white space and comments stand between them, the document
-        without them: its pieces and what stands between them left out, one
-        processing instruction in their place. None if there is no such piece."""
+        that can be used, learning those met for the first time; where only
+        white space and comments stand between them, the document without
+        them (its pieces and what stands between them left out, one
+        processing instruction in their place), else None; and the number of
+        line breaks in the document. None if there is no such piece."""
         kind = getattr(visitor(), "kind", None)
-        known, between = self._known, _BETWEEN.fullmatch
+        known = self._known.get(kind)
+        if known is None:
+            known = self._known[kind] = {}
+        between, find, search = _BETWEEN.fullmatch, data.find, _PIECE_START.search
         placed: list[tuple[int, int, int, Any, int]] = []
         comments: list[bytes] | None = []  # what stands between the pieces, if only that
         position, line = 0, 1
-        for start, end in _piece_spans(data):
+        # Each piece: from a start tag to the first end tag of its kind after it
+        # (a guess: inside a comment, nested ... which the rest checks).
+        started = search(data)
+        while started is not None:
+            start = started.start()
+            end_tag, end_match = _PIECE_END[started[1]]
+            at = find(end_tag, start)
+            closed = end_match.match(data, at) if at >= 0 else None
+            if closed is None:
+                started = search(data, start + 4)
+                continue
+            end = closed.end()
+            started = search(data, end)
             piece = data[start:end]
-            found = known.get((kind, piece))
+            found = known.get(piece)
             if found is None:
-                found = self._learn(kind, piece, visitor)
+                found = self._learn(known, piece, visitor)
             if found is _UNUSABLE:
                 continue
             if placed and comments is not None:
                 if between(data, position, start) is None:
                     comments = None
-                elif b"<" in data[position:start]:
+                elif find(b"<", position, start) >= 0:
                     comments.append(data[position:start])
             line += data.count(b"\n", position, start)
             tables, breaks = found
@@ -333,14 +352,15 @@ class Pieces:
             position = end
         if not placed:
             return None
+        breaks = line - 1 + data.count(b"\n", position)
         if comments is None:
-            return placed, None
+            return placed, None, breaks
         outside = data[: placed[0][0]] + b"<?%s?>" % _PLACE + b"".join(comments) + data[position:]
-        return placed, outside
+        return placed, outside, breaks
 
-    def _learn(self, kind: Any, piece: bytes, visitor: Callable[[], V]) -> Any:
+    def _learn(self, known: dict[bytes, Any], piece: bytes, visitor: Callable[[], V]) -> Any:
         """(tables, line breaks) of a piece met for the first time, parsed
-        alone, kept; or :data:`_UNUSABLE`."""
+        alone, kept in ``known``; or :data:`_UNUSABLE`."""
         from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
         found = _UNUSABLE
@@ -350,17 +370,18 @@ class Pieces:
         except etree.XMLSyntaxError:
             root = None
         # The bytes start with "<lens" (or "<camera", "<mount") and end with ">":
-        # one child, one element.
-        if root is not None and len(root) == 1:
+        # one child, one element. Names in a namespace are read otherwise.
+        if root is not None and len(root) == 1 and b"xmlns" not in piece:
             visiting = visitor()
             visiting.add(root[0], _relative_line)
             taken = visiting.taken()  # type: ignore[attr-defined]
             if taken is not None:
                 found = (taken, piece.count(b"\n"))
         if self._size + len(piece) > self.MAX_BYTES:
-            self._known.clear()
+            for kept in self._known.values():
+                kept.clear()
             self._size = 0
-        self._known[kind, piece] = found
+        known[piece] = found
         self._size += len(piece)
         return found
 
@@ -381,25 +402,15 @@ _PIECE_END = {
 _BETWEEN = re.compile(rb"(?:[ \t\n]|<!--(?:[^-]|-[^-])*-->)*")
 
 
-def _piece_spans(data: bytes) -> Iterator[tuple[int, int]]:
-    """(start, end) of each piece, from its start tag to the first end tag of
-    its kind after it: a guess (inside a comment, nested ...), which
-    :class:`Pieces` checks."""
-    find, search = data.find, _PIECE_START.search
-    found = search(data)
-    while found is not None:
-        start = found.start()
-        end_tag, end_match = _PIECE_END[found[1]]
-        end = find(end_tag, start)
-        if end < 0:
-            found = search(data, start + 4)
-            continue
-        closed = end_match.match(data, end)
-        if closed is not None:
-            yield start, closed.end()
-            found = search(data, closed.end())
-        else:
-            found = search(data, start + 4)
+def _plain_prolog(data: bytes) -> bool:
+    """Whether a document declares no encoding but UTF-8, no document type
+    with declarations of its own, and has a database root."""
+    declared = _ENCODING.match(data)
+    return (
+        (declared is None or declared.group(1).lower() in (b"utf-8", b"utf8"))
+        and not _declares(data)
+        and _root_name(data) == DATABASE_ROOT
+    )
 
 
 def _alone_in_root(data: bytes) -> Any:
