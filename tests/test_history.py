@@ -1088,6 +1088,20 @@ def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_
         assert (tmp_path / "forked" / name).read_text(encoding="utf-8") == stream.getvalue()
 
 
+def test_the_revisions_are_handed_over_as_soon_as_they_are_counted(repo, tmp_path):
+    handed = []
+    result = audit_history(
+        repo.path, cache=tmp_path, revisions_read=lambda *found: handed.append(found)
+    )
+    assert handed == [(result.newest, result.revisions)] and result.revisions
+    assert handed[0][1] is result.revisions  # the result's own, before it is made
+    handed.clear()
+    again = audit_history(
+        repo.path, cache=tmp_path, revisions_read=lambda *found: handed.append(found)
+    )
+    assert handed == [] and again.revisions == result.revisions  # the run kept whole
+
+
 def test_progress_reaches_every_file_version_read(repo, tmp_path):
     seen = []
     result = audit_history(

@@ -10,7 +10,8 @@ from pathlib import Path
 import click
 
 from ..commands import cycle_collector_off, refuse_writing_inputs
-from ..history import HistoryError, audit_history, trend_figure
+from ..history import Commit, HistoryError, Revision, audit_history, trend_figure
+from ..history.commits import normalized_path
 from ..history.index import caches, key_of
 from ..read import parallel
 from ..read.paths import enclosing_database
@@ -106,6 +107,12 @@ def history(
     # it ends. The trend figures are drawn by a process that imports matplotlib
     # meanwhile (forked now: the commits and the newest files are read beside it).
     with cycle_collector_off(), parallel.Beside(_drawn, _import_matplotlib) as trend:
+
+        def revisions_read(newest: Commit, revisions: list[Revision]) -> None:
+            # Drawn from here on, while the rest of the history is worked out.
+            title = _title(repository, db_path, first_parent, newest)
+            trend.send(([revision.record() for revision in revisions], title))
+
         try:
             result = audit_history(
                 repository,
@@ -116,6 +123,7 @@ def history(
                 first_parent=first_parent,
                 cache=cache,
                 progress=bar.update,
+                revisions_read=revisions_read,
             )
         except HistoryError as error:
             bar.close()
@@ -173,11 +181,7 @@ def _write_outputs(
     history_csv = io.StringIO()
     result.write_csv(history_csv)
     contents["history.csv"] = history_csv.getvalue()
-    mode = "first-parent line" if result.first_parent else "all commits"
-    title = (
-        f"{result.path} of {result.repository.resolve().name} "
-        f"({mode}) up to {result.newest.date[:10]}"
-    )
+    title = _title(result.repository, result.path, result.first_parent, result.newest)
     figures = _figures(result, title, contents["history.csv"], cache, trend)
     for name, write in (
         ("introduced.csv", result.write_introduced_csv),
@@ -196,6 +200,13 @@ def _write_outputs(
     return [output_dir / name for name in contents]
 
 
+def _title(repository: Path, db_path: str, first_parent: bool, newest: Commit) -> str:
+    """The trend figure's title."""
+    mode = "first-parent line" if first_parent else "all commits"
+    path = normalized_path(db_path)
+    return f"{path} of {repository.resolve().name} ({mode}) up to {newest.date[:10]}"
+
+
 _FIGURES = ("trend.png", "trend.svg")
 
 
@@ -206,7 +217,8 @@ def _figures(
     history.csv, title, matplotlib and lensaudit code (matplotlib is slow to
     import and to draw, and the history of an unchanged repository is the
     same), kept in the history's index (:mod:`lensaudit.history.index`), or
-    drawn by ``trend``, which is sent what to draw now."""
+    drawn by ``trend``, which has been sent what to draw (``revisions_read``
+    of :func:`~lensaudit.history.audit_history`) or is sent it now."""
     # importlib.metadata: slow to import, only for provenance
     from importlib.metadata import PackageNotFoundError, version
 
@@ -224,7 +236,8 @@ def _figures(
     ):
         trend.stop()
         return lambda: dict(zip(_FIGURES, found, strict=True))
-    trend.send((result.records(), title))
+    if not trend.sent:
+        trend.send((result.records(), title))
 
     def drawn() -> dict[str, bytes]:
         figures = trend.result()

@@ -96,6 +96,7 @@ def audit_history(
     first_parent: bool = False,
     cache: bool | str | os.PathLike[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    revisions_read: Callable[[Commit, list[Revision]], object] | None = None,
 ) -> History:
     """Audit every revision of the database at ``path`` in a git repository.
 
@@ -106,7 +107,10 @@ def audit_history(
     ``first_parent``. ``cache`` is the one cache's directory, or True for
     lensaudit's (see :func:`lensaudit.read.cache.cache_dir`): file versions
     read are kept there, and the run in the history's index. ``progress(done,
-    total)`` is called as file versions are read.
+    total)`` is called as file versions are read; ``revisions_read(newest,
+    revisions)`` with the newest commit and the revisions of the result as
+    soon as they are counted, before the introducers of the newest entries
+    and the fold events are worked out (not for a run the index keeps whole).
 
     Raises :class:`HistoryError` when git cannot run, the directory is not a
     repository, the revision or a date is invalid, no commit is selected, or
@@ -143,6 +147,8 @@ def audit_history(
     states, revisions = introduced.walk(
         selected, outside, files, first_parent, set(mainline), audits, identities
     )
+    if revisions_read is not None:
+        revisions_read(newest, revisions)
     result = History(
         repository=Path(repository),
         path=db_path,

@@ -254,6 +254,11 @@ class Beside:
         self._started = True
         return self
 
+    @property
+    def sent(self) -> bool:
+        """Whether :meth:`send` was called."""
+        return self._argument is not None
+
     def send(self, argument: Any) -> None:
         """Have ``work(argument)`` done (see :meth:`result`)."""
         self._argument = (argument,)
