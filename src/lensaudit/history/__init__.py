@@ -265,9 +265,12 @@ def _read_versions(
     def read_newest() -> None:  # by this process, while the others read the rest
         full.update(_read_in_full(git, newest, names, store))
 
+    # In the order the commits bring them (oldest first): git reads a version
+    # most cheaply after the one it is stored as a change of.
+    in_order = dict.fromkeys(blob for m in files.values() for blob in m.values())
     audits |= versions.read_versions(
         git,
-        [blob for blob in every_blob if blob not in audits and blob not in full_set],
+        [blob for blob in in_order if blob not in audits and blob not in full_set],
         names,
         interner,
         None
