@@ -75,6 +75,31 @@ def test_real_file_versions_read_by_piece_as_whole(tmp_path):
     assert by_pieces > 0.8 * len(versions)  # nearly all are read so
 
 
+def test_real_file_versions_read_one_after_another_as_alone(tmp_path):
+    # Each version after the one before it, as the history reads them: most of
+    # what the memo found in the last document is taken as it is.
+    versions = file_versions(tmp_path, revisions=60, by_file=True)
+    alone, with_memo = read_both(versions, refusals=False)
+    assert with_memo == alone
+    by_pieces, wrong = pieces_as_whole(versions)
+    assert wrong == [] and by_pieces > 0.8 * len(versions)
+
+
+def test_what_the_last_document_gave_is_taken_only_where_it_is_found_again():
+    # The lens is not closed in the first document: its pieces are guessed from
+    # inside it (the mount). The second closes it after the first's mount ends.
+    lens = LENS.replace("</lens>\n", "")
+    first = document(OTHER, lens, MOUNT)
+    second = document(OTHER, lens + "</lens>\n", MOUNT)
+    pieces = read.Pieces()
+    assert read.read_pieces(first, pieces) is None
+    assert read.read_pieces(second, pieces) is not None
+    fresh = read.Pieces()
+    assert read.read_pieces(second, fresh) is not None
+    alone, with_memo = read_both([first, second, first, second, OTHER.encode()])
+    assert with_memo == alone
+
+
 def test_what_liblensfun_refuses_is_judged_only_when_asked_for(tmp_path):
     data = (
         b'<lensdatabase version="2"><lens><maker>A</maker><model>B</model>'

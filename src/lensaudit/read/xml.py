@@ -245,6 +245,8 @@ class Pieces:
         #: kind -> {bytes: (tables, line breaks) of a piece, or _UNUSABLE}.
         self._known: dict[Any, dict[bytes, Any]] = {}
         self._size = 0
+        #: kind -> (bytes, pieces found) of the last document scanned.
+        self._last: dict[Any, tuple[bytes, list[tuple]]] = {}
 
     def usable(self, data: bytes, read: tuple[str, ...]) -> bool:
         """Whether a document may be read this way (see above)."""
@@ -259,20 +261,20 @@ class Pieces:
         visiting = visitor()
         root = _alone_in_root(outside) if outside is not None else None
         if root is not None:
-            for _, _, line, tables, _ in placed:
+            for _, _, line, tables, *_ in placed:
                 visiting.extend(tables, line)
             return root, visiting
         from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
         parts: list[bytes] = []
         position = 0
-        for number, (start, end, _, _, breaks) in enumerate(placed):
+        for number, (start, end, _, _, breaks, *_) in enumerate(placed):
             parts += (data[position:start], b"<?%s %d%s?>" % (_PLACE, number, b"\n" * breaks))
             position = end
         parts.append(data[position:])
         document = b"".join(parts)
         _show_document(document, visiting)
-        placing = _Placing(visiting, [(line, tables) for _, _, line, tables, _ in placed])
+        placing = _Placing(visiting, [(line, tables) for _, _, line, tables, *_ in placed])
         try:
             root = _stream(document, placing, None)
         except etree.XMLSyntaxError:
@@ -302,60 +304,104 @@ class Pieces:
         root = _alone_in_root(outside)
         if root is None or root.tag != DATABASE_ROOT:  # (a problem of the file: see parse())
             return None
-        return [tables for _, _, _, tables, _ in placed]
+        return [piece[3] for piece in placed]
 
     def _scan(
         self, data: bytes, visitor: Callable[[], V]
-    ) -> tuple[list[tuple[int, int, int, Any, int]], bytes | None, int] | None:
-        """(start, end, line, tables, line breaks) of each piece of a document
-        that can be used, learning those met for the first time; where only
-        white space and comments stand between them, the document without
-        them (its pieces and what stands between them left out, one
-        processing instruction in their place), else None; and the number of
-        line breaks in the document. None if there is no such piece."""
+    ) -> tuple[list[tuple], bytes | None, int] | None:
+        """(start, end, line, tables, line breaks, what stands before it, how far
+        the scan looked to find it) of each piece of a document that can be
+        used, learning those met for the first time; where only white space
+        and comments stand between them, the document without them (its
+        pieces and what stands between them left out, one processing
+        instruction in their place), else None; and the number of line breaks
+        in the document. None if there is no such piece.
+
+        The pieces of a document are found one after another, each from where
+        the one before ends, so that from the same place in the same bytes the
+        same pieces follow. So the pieces of the last document scanned (for
+        the same kind of reader) are taken as they are as far as the two
+        documents are the same from their start and the scan looked no
+        further to find them, and the rest as they are once this scan finds a
+        piece where one of them starts, where the two are the same to the end."""
         kind = getattr(visitor(), "kind", None)
         known = self._known.get(kind)
         if known is None:
             known = self._known[kind] = {}
         between, find, search = _BETWEEN.fullmatch, data.find, _PIECE_START.search
-        placed: list[tuple[int, int, int, Any, int]] = []
-        comments: list[bytes] | None = []  # what stands between the pieces, if only that
+        placed: list[tuple] = []
         position, line = 0, 1
+        synced: dict[int, int] = {}  # where a piece of the last document starts here -> its number
+        last = self._last.get(kind)
+        if last is not None:
+            before, old = last
+            same = _common_prefix(data, before)
+            for piece in old:
+                if piece[6] > same:
+                    break
+                placed.append(piece)
+            if placed:
+                position, line = placed[-1][1], placed[-1][2] + placed[-1][4]
+            tail = _common_suffix(data, before, min(len(data), len(before)) - same)
+            shift = len(data) - len(before)
+            synced = {
+                piece[0] + shift: number
+                for number, piece in enumerate(old)
+                if piece[0] >= len(before) - tail
+            }
         # Each piece: from a start tag to the first end tag of its kind after it
         # (a guess: inside a comment, nested ... which the rest checks).
-        started = search(data)
+        started = search(data, position)
+        reach = position  # how far the scan has looked since the last piece
         while started is not None:
             start = started.start()
             end_tag, end_match = _PIECE_END[started[1]]
             at = find(end_tag, start)
             closed = end_match.match(data, at) if at >= 0 else None
             if closed is None:
+                reach = len(data)  # (where the match ends does not say how far it looked)
                 started = search(data, start + 4)
                 continue
             end = closed.end()
+            reach = max(reach, end)
             started = search(data, end)
-            piece = data[start:end]
-            found = known.get(piece)
-            if found is None:
-                found = self._learn(known, piece, visitor)
-            if found is _UNUSABLE:
-                continue
-            if placed and comments is not None:
-                if between(data, position, start) is None:
-                    comments = None
-                elif find(b"<", position, start) >= 0:
-                    comments.append(data[position:start])
+            number = synced.get(start)
+            if number is not None:
+                found = old[number][3], old[number][4]
+            else:
+                piece = data[start:end]
+                found = known.get(piece)
+                if found is None:
+                    found = self._learn(known, piece, visitor)
+                if found is _UNUSABLE:
+                    continue
+            if not placed:
+                gap = None
+            elif between(data, position, start) is None:
+                gap = _UNUSABLE
+            else:
+                gap = data[position:start] if find(b"<", position, start) >= 0 else None
             line += data.count(b"\n", position, start)
             tables, breaks = found
-            placed.append((start, end, line, tables, breaks))
+            placed.append((start, end, line, tables, breaks, gap, reach))
             line += breaks
-            position = end
+            position = reach = end
+            if number is not None:  # the rest as in the last document
+                moved = line - old[number][2] - breaks
+                placed += [
+                    (start + shift, end + shift, line + moved, tables, breaks, gap, reach + shift)
+                    for start, end, line, tables, breaks, gap, reach in old[number + 1 :]
+                ]
+                position, line = placed[-1][1], placed[-1][2] + placed[-1][4]
+                break
+        self._last[kind] = (data, placed)
         if not placed:
             return None
         breaks = line - 1 + data.count(b"\n", position)
-        if comments is None:
+        gaps = [piece[5] for piece in placed[1:] if piece[5] is not None]
+        if _UNUSABLE in gaps:
             return placed, None, breaks
-        outside = data[: placed[0][0]] + b"<?%s?>" % _PLACE + b"".join(comments) + data[position:]
+        outside = data[: placed[0][0]] + b"<?%s?>" % _PLACE + b"".join(gaps) + data[position:]
         return placed, outside, breaks
 
     def _learn(self, known: dict[bytes, Any], piece: bytes, visitor: Callable[[], V]) -> Any:
@@ -400,6 +446,46 @@ _PIECE_END = {
 #: them: white space and comments (whose characters libxml2 then judges).
 #: Each byte can be matched one way only: no backtracking to speak of.
 _BETWEEN = re.compile(rb"(?:[ \t\n]|<!--(?:[^-]|-[^-])*-->)*")
+
+
+def _common_prefix(a: bytes, b: bytes) -> int:
+    """The length of the longest start ``a`` and ``b`` have in common."""
+    limit = min(len(a), len(b))
+    low, step = 0, 1024
+    while low < limit:  # a[:low] == b[:low]
+        high = min(low + step, limit)
+        if a[low:high] != b[low:high]:
+            break
+        low, step = high, 2 * step
+    else:
+        return limit
+    while high - low > 1:  # a[low:high] != b[low:high]
+        middle = (low + high) // 2
+        if a[low:middle] == b[low:middle]:
+            low = middle
+        else:
+            high = middle
+    return low
+
+
+def _common_suffix(a: bytes, b: bytes, limit: int) -> int:
+    """The length of the longest end ``a`` and ``b`` have in common, up to ``limit``."""
+    end_a, end_b = len(a), len(b)
+    low, step = 0, 1024
+    while low < limit:  # the last low bytes are the same
+        high = min(low + step, limit)
+        if a[end_a - high : end_a - low] != b[end_b - high : end_b - low]:
+            break
+        low, step = high, 2 * step
+    else:
+        return limit
+    while high - low > 1:
+        middle = (low + high) // 2
+        if a[end_a - middle : end_a - low] == b[end_b - middle : end_b - low]:
+            low = middle
+        else:
+            high = middle
+    return low
 
 
 def _plain_prolog(data: bytes) -> bool:
