@@ -144,11 +144,10 @@ def audit_history(
     full, audits, reused, identities = _read_versions(
         git, files, files[newest.hash], (store, index), progress
     )
-    states, revisions = introduced.walk(
-        selected, outside, files, first_parent, set(mainline), audits, identities
-    )
+    revisions = introduced.revisions(selected, files, first_parent, set(mainline), audits)
     if revisions_read is not None:
         revisions_read(newest, revisions)
+    states = introduced.walk(selected, outside, files, first_parent, audits, identities)
     result = History(
         repository=Path(repository),
         path=db_path,

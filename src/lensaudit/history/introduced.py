@@ -141,20 +141,40 @@ def parents_of(commit: Commit, first_parent: bool) -> tuple[str, ...]:
     return commit.parents[:1] if first_parent else commit.parents
 
 
+def changes_database(commit: Commit, files: dict[str, dict[str, str]], first_parent: bool) -> bool:
+    """Whether ``commit`` holds other file versions than its first parent
+    (``files``: {commit: {name: blob id}}), or has no parent followed."""
+    parents = parents_of(commit, first_parent)
+    return not parents or files[parents[0]] != files[commit.hash]
+
+
+def revisions(
+    commits: list[Commit],
+    files: dict[str, dict[str, str]],
+    first_parent: bool,
+    mainline: set[str],
+    audits: dict[str, BlobAudit],
+) -> list[Revision]:
+    """The revisions of the commits that change the database, counted."""
+    return [
+        revision(commit, commit.hash in mainline, files[commit.hash], audits)
+        for commit in commits
+        if changes_database(commit, files, first_parent)
+    ]
+
+
 def walk(
     commits: list[Commit],
     outside: list[str],
     files: dict[str, dict[str, str]],
     first_parent: bool,
-    mainline: set[str],
     audits: dict[str, BlobAudit],
     identities: list[tuple],
-) -> tuple[dict[str, _State], list[Revision]]:
-    """The file states of every commit, walking parents before children, and the
-    revisions of the commits that change the database (``files``: {commit:
-    {name: blob id}}; ``identities``: the entry identity of each interned
-    number). The entries of ``outside`` commits, parents of the first ones
-    examined, count as there before them."""
+) -> dict[str, _State]:
+    """The file states of every commit, walking parents before children
+    (``files``: {commit: {name: blob id}}; ``identities``: the entry identity
+    of each interned number). The entries of ``outside`` commits, parents of
+    the first ones examined, count as there before them."""
     calibration = calibration_identities(identities)
     states: dict[str, _State] = {
         p: {
@@ -164,17 +184,16 @@ def walk(
         for p in outside
     }
     met = {ident for state in states.values() for file in state.values() for ident in file.idents}
-    revisions = []
     for index, commit in enumerate(commits):
         parent_hashes = parents_of(commit, first_parent)
-        mine = files[commit.hash]
-        if parent_hashes and files[parent_hashes[0]] == mine:
+        if not changes_database(commit, files, first_parent):
             states[commit.hash] = states[parent_hashes[0]]
             continue
         parent_states = [states[p] for p in parent_hashes]
-        states[commit.hash] = _next_state(index, mine, parent_states, audits, calibration, met)
-        revisions.append(revision(commit, commit.hash in mainline, mine, audits))
-    return states, revisions
+        states[commit.hash] = _next_state(
+            index, files[commit.hash], parent_states, audits, calibration, met
+        )
+    return states
 
 
 def introduced_entries(
