@@ -6,10 +6,11 @@ Every command runs in a fresh process, in turns, and the medians are shown
 with their ratio to the anchor: a cold ``lensaudit scan --no-cache`` of the
 head revision's ``data/db``. "cold" is ``lensaudit history`` with an empty
 cache, "warm" the same run again, "one new commit" a run whose cache holds
-the history up to the parent of the head. Each of the history's two memos
-(the reader's lens memo, :class:`lensaudit.read.Pieces`, and the solver's
-memo of entries) is switched off in turn by a patch for an A/B of "cold";
-"saves" is the share of that time the memo saves. The naive way (read each revision
+the history up to the parent of the head. Each of the history's memos (the
+reader's memo of pieces, :class:`lensaudit.read.Pieces`, whole; its use of
+the last document read; the summary of each piece; the solver's memo of
+entries) is switched off in turn by a patch for an A/B of "cold"; "saves"
+is the share of that time the memo saves. The naive way (read each revision
 through git, parse, audit) is timed in-process on revisions spread evenly
 over the history and extrapolated to all of them. Needs
 ../shared/data/lensfun-db-history.bundle beside the project (cloned into a
@@ -37,15 +38,23 @@ BUNDLE = Path(__file__).resolve().parents[3] / "shared" / "data" / "lensfun-db-h
 GOALS = {"cold": 10.0, "warm": 5.0}
 
 _RUN = "from lensaudit.console import run\nrun()\n"
-#: The history's two memos, each switched off by a patch (the A/B of "cold").
+#: The history's memos, each switched off by a patch (the A/B of "cold").
 SWITCHES = {
-    "lens memo": (
-        "import lensaudit.read.xml as x\nx.Pieces.usable = lambda self, data, read: False\n"
+    # Every version read whole: no piece is kept, nor summarized on its own.
+    "piece memo": "import lensaudit.read.xml as x\nx.Pieces._scan = lambda *a: None\n",
+    # Each version scanned from its start, none taken from the last one.
+    "last-document memo": (
+        "import lensaudit.read.xml as x\n"
+        "x._common_prefix = lambda a, b: 0\n"
+        "x._common_suffix = lambda a, b, limit: 0\n"
     ),
+    # A piece's summary made again for each version that holds it.
+    "summary memo": "import lensaudit.history.versions as v\nv.MEMO_PIECES = -1\n",
     "solver memo": (
         "import lensaudit.history.versions as v\n"
-        "real = v.file_metrics\n"
-        "v.file_metrics = lambda tables, cache, memo=None: real(tables, cache)\n"
+        "real_file, real_columns = v.file_metrics, v.metric_columns\n"
+        "v.file_metrics = lambda tables, cache, memo=None: real_file(tables, cache)\n"
+        "v.metric_columns = lambda columns, memo=None: real_columns(columns)\n"
     ),
 }
 
