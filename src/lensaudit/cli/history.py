@@ -264,8 +264,16 @@ def _drawn(request: tuple[list[dict], str]) -> dict[str, bytes]:
 
 def _draw(records: list[dict], title: str) -> dict[str, bytes]:
     """trend.png and trend.svg, the SVG drawn by a process forked for it while
-    this one draws the PNG (see :class:`~lensaudit.read.parallel.Beside`)."""
+    this one draws the PNG (see :class:`~lensaudit.read.parallel.Beside`).
+    The figure is laid out once, as the PNG is drawn (each drawing would lay
+    it out again, a third of its cost): the same PNG, and an SVG laid out
+    with the PNG's measure of its text."""
     figure = trend_figure(records, title=title)
+    dpi = figure.get_dpi()
+    figure.set_dpi(_FORMATS["trend.png"]["dpi"])
+    figure.get_layout_engine().execute(figure)
+    figure.set_layout_engine("none")
+    figure.set_dpi(dpi)
 
     def drawn(name: str) -> bytes:
         stream = io.BytesIO()
