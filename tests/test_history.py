@@ -1088,6 +1088,29 @@ def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_
         assert (tmp_path / "forked" / name).read_text(encoding="utf-8") == stream.getvalue()
 
 
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="no symbolic links here")
+def test_only_the_xml_files_directly_in_the_database_are_versions(tmp_path):
+    other = FOLDING_LENS.replace("Test 10mm", "Other 10mm")
+    repository = git_repository(
+        tmp_path / "repo",
+        {
+            "data/db/a.xml": FOLDING_LENS,
+            "data/db/B.XML": other,
+            "data/db/notes.txt": other,
+            "data/db/sub/c.xml": other.replace("Other", "Sub"),
+        },
+    )
+    os.symlink("a.xml", repository / "data" / "db" / "link.xml")
+    _git(repository, "add", "-A")
+    _git(repository, "commit", "-qm", "a link")
+    result = audit_history(repository)
+    assert result.blobs == 2  # a.xml and B.XML, read once each
+    lenses = {entry.entry.lens for entry in result.introduced}
+    assert lenses == {"Test 10mm", "Other 10mm"}
+    # The link changes no database file: its commit is no revision of it.
+    assert result.commits == 2 and [r.counts["audited"] for r in result.revisions] == [2]
+
+
 def test_the_revisions_are_handed_over_as_soon_as_they_are_counted(repo, tmp_path):
     handed = []
     result = audit_history(

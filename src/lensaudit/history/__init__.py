@@ -147,6 +147,8 @@ def audit_history(
     revisions = introduced.revisions(selected, files, first_parent, set(mainline), audits)
     if revisions_read is not None:
         revisions_read(newest, revisions)
+    if index is not None:  # kept once the revisions are handed over
+        keep_audits(index, identities, audits)
     states = introduced.walk(selected, outside, files, first_parent, audits, identities)
     result = History(
         repository=Path(repository),
@@ -281,8 +283,6 @@ def _read_versions(
         (blob, interner.audit(*versions.summarize(*found))) for blob, found in full.items()
     )
     audits = {blob: audits[blob] for blob in every_blob}
-    if index is not None:
-        keep_audits(index, interner, audits)
     return full, audits, len(reused), interner.values
 
 

@@ -16,19 +16,30 @@ def _tree_entries(oid_size: int) -> re.Pattern[bytes]:
     """The entries of a raw git tree object: mode, name, object id (``oid_size``
     bytes). Each entry starts where the one before it ends, so that the
     pattern's matches, one after another, are the entries."""
-    return re.compile(rb"([0-7]+) ([^\0]*)\0(.{%d})" % oid_size, re.DOTALL)
+    return re.compile(rb"[0-7]+ [^\0]*\0.{%d}" % oid_size, re.DOTALL)
 
 
-def _tree_files(data: bytes, oid_size: int) -> dict[str, str]:
-    """{name: blob id} of the ``*.xml`` files directly in a raw git tree object.
+def _tree_files(data: bytes, oid_size: int, known: dict[bytes, tuple]) -> dict[str, str]:
+    """{name: blob id} of the ``*.xml`` files directly in a raw git tree object;
+    ``known`` keeps what each entry met is (the trees of a history share
+    nearly all their entries).
 
     Subdirectories, symbolic links and submodules are not database files.
     """
-    return {
-        name.decode("utf-8", "surrogateescape"): oid.hex()
-        for mode, name, oid in _tree_entries(oid_size).findall(data)
-        if mode.startswith(b"100") and name.lower().endswith(b".xml")
-    }
+    found = {}
+    for entry in _tree_entries(oid_size).findall(data):
+        file = known.get(entry)
+        if file is None:
+            mode, _, rest = entry.partition(b" ")
+            name = rest[: -oid_size - 1]
+            file = known[entry] = (
+                (name.decode("utf-8", "surrogateescape"), entry[-oid_size:].hex())
+                if mode.startswith(b"100") and name.lower().endswith(b".xml")
+                else ()
+            )
+        if file:
+            found[file[0]] = file[1]
+    return found
 
 
 def file_maps(
@@ -37,6 +48,7 @@ def file_maps(
     """{commit: {file name: blob id}} of the database at each commit ({} if absent),
     and the commits where the path exists at all."""
     by_tree: dict[str, dict[str, str]] = {}
+    entries: dict[bytes, tuple] = {}
     maps = {}
     present = set()
     requests = [f"{h}:{db_path}" for h in hashes]
@@ -48,7 +60,7 @@ def file_maps(
         oid, kind, data = answer
         if kind == "tree":
             if oid not in by_tree:
-                by_tree[oid] = _tree_files(data, oid_size)
+                by_tree[oid] = _tree_files(data, oid_size, entries)
             maps[commit] = by_tree[oid]
         elif kind == "blob":
             maps[commit] = {PurePosixPath(db_path).name: oid}

@@ -171,14 +171,14 @@ def audits_kept(index: Index | None, interner: Interner) -> dict[str, BlobAudit]
     return found
 
 
-def keep_audits(index: Index, interner: Interner, audits: dict[str, BlobAudit]) -> None:
-    """Keep the audits of a run's file versions (by blob), their identities
-    interned by ``interner``, in the index in place of the last run's."""
+def keep_audits(index: Index, identities: list[tuple], audits: dict[str, BlobAudit]) -> None:
+    """Keep the audits of a run's file versions (by blob), the identities their
+    numbers stand for, in the index in place of the last run's."""
     kept = {
         blob: (audit.error, audit.counts, audit.idents, audit.folding)
         for blob, audit in audits.items()
     }
-    index.put("versions", _VERSIONS_KEY, (interner.values, kept))
+    index.put("versions", _VERSIONS_KEY, (identities, kept))
 
 
 def _commit_data(commit: Commit | None) -> tuple | None:
