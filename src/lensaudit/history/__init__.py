@@ -127,13 +127,8 @@ def audit_history(
     run_key = repr((tip, db_path, filters, first_parent, time.tzname, time.timezone))
     found = _last_run(index, run_key)
     if found is not None:
-        return replace(
-            found,
-            repository=Path(repository),
-            revision=revision,
-            seconds=time.perf_counter() - started,
-            warnings=warnings,
-        )
+        again = {"repository": Path(repository), "revision": revision, "warnings": warnings}
+        return replace(found, seconds=time.perf_counter() - started, **again)
     # 1. The commits, and the file versions of the database at each.
     selected, mainline, outside, files = _commits(
         git, tip, filters, first_parent, revision, db_path
@@ -149,7 +144,6 @@ def audit_history(
         revisions_read(newest, revisions)
     if index is not None:  # kept once the revisions are handed over
         keep_audits(index, identities, audits)
-    states = introduced.walk(selected, outside, files, first_parent, audits, identities)
     result = History(
         repository=Path(repository),
         path=db_path,
@@ -157,10 +151,8 @@ def audit_history(
         first_parent=first_parent,
         revisions=revisions,
         newest=newest,
-        introduced=introduced.introduced_entries(
-            {name: full[blob] for name, blob in files[newest.hash].items()},
-            states[newest.hash],
-            selected,
+        introduced=_introducers(
+            (selected, outside, newest.hash), files, first_parent, (audits, identities), full
         ),
         commits=len(selected),
         blobs=len(audits),
@@ -173,6 +165,26 @@ def audit_history(
     if index is not None:
         index.put("run", run_key, history_data(result))
     return result
+
+
+def _introducers(
+    walked: tuple[list[Commit], list[str], str],
+    files: dict[str, dict[str, str]],
+    first_parent: bool,
+    audited: tuple[dict[str, Any], list[tuple]],
+    full: dict[str, tuple[read.FileTables, dict[str, list]]],
+) -> list[IntroducedEntry]:
+    """The entries of the newest commit with a finite r_max, each with the
+    commit that introduced it: from the commits selected, their parents
+    outside the selection and the newest commit (``walked``), the audits of
+    every file version and the identities their numbers stand for
+    (``audited``), and the newest files read in full (``full``, by blob)."""
+    selected, outside, newest = walked
+    audits, identities = audited
+    states = introduced.walk(selected, outside, files, first_parent, audits, identities)
+    return introduced.introduced_entries(
+        {name: full[blob] for name, blob in files[newest].items()}, states[newest], selected
+    )
 
 
 def _events(

@@ -237,6 +237,11 @@ class Pieces:
     and positions are those of the document itself. Only pieces whose every
     row is ``ok`` are kept (a message may name a line). Bounded: everything
     is forgotten past :attr:`MAX_BYTES` of pieces kept.
+
+    The pieces of a document are found as the last document's were where
+    the two are the same (see :meth:`_scan`), and :meth:`placed` gives the
+    tables of each piece of a document read as nothing but its pieces, for
+    what is made of a piece's rows to be kept by piece.
     """
 
     MAX_BYTES = 64 << 20
@@ -329,26 +334,8 @@ class Pieces:
         if known is None:
             known = self._known[kind] = {}
         between, find, search = _BETWEEN.fullmatch, data.find, _PIECE_START.search
-        placed: list[tuple] = []
-        position, line = 0, 1
-        synced: dict[int, int] = {}  # where a piece of the last document starts here -> its number
-        last = self._last.get(kind)
-        if last is not None:
-            before, old = last
-            same = _common_prefix(data, before)
-            for piece in old:
-                if piece[6] > same:
-                    break
-                placed.append(piece)
-            if placed:
-                position, line = placed[-1][1], placed[-1][2] + placed[-1][4]
-            tail = _common_suffix(data, before, min(len(data), len(before)) - same)
-            shift = len(data) - len(before)
-            synced = {
-                piece[0] + shift: number
-                for number, piece in enumerate(old)
-                if piece[0] >= len(before) - tail
-            }
+        placed, old, synced, shift = self._as_last(kind, data)
+        position, line = (placed[-1][1], placed[-1][2] + placed[-1][4]) if placed else (0, 1)
         # Each piece: from a start tag to the first end tag of its kind after it
         # (a guess: inside a comment, nested ... which the rest checks).
         started = search(data, position)
@@ -403,6 +390,31 @@ class Pieces:
             return placed, None, breaks
         outside = data[: placed[0][0]] + b"<?%s?>" % _PLACE + b"".join(gaps) + data[position:]
         return placed, outside, breaks
+
+    def _as_last(self, kind: Any, data: bytes) -> tuple[list[tuple], list[tuple], dict, int]:
+        """What :meth:`_scan` takes of the last document scanned for ``kind``: its
+        pieces found as far as the two are the same from their start (and the
+        scan looked no further), its pieces, where those in the part the two
+        share to their end start in ``data`` (with their number), and how
+        much longer ``data`` is."""
+        last = self._last.get(kind)
+        if last is None:
+            return [], [], {}, 0
+        before, old = last
+        same = _common_prefix(data, before)
+        taken = []
+        for piece in old:
+            if piece[6] > same:
+                break
+            taken.append(piece)
+        tail = _common_suffix(data, before, min(len(data), len(before)) - same)
+        shift = len(data) - len(before)
+        synced = {
+            piece[0] + shift: number
+            for number, piece in enumerate(old)
+            if piece[0] >= len(before) - tail
+        }
+        return taken, old, synced, shift
 
     def _learn(self, known: dict[bytes, Any], piece: bytes, visitor: Callable[[], V]) -> Any:
         """(tables, line breaks) of a piece met for the first time, parsed
