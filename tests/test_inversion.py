@@ -264,6 +264,8 @@ def _residual_is_rounding(entry: DistortionEntry) -> bool:
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(models())
 @example(_synthetic("poly3", (2.220446049250313e-16,), 4.0))
+# liblensfun fails at 2841 px, passes at 2842 and fails from 2843 on (named: 2843.2 px)
+@example(_synthetic("ptlens", (0.0, -0.25, 0.46022897958755493), 4.0))
 def test_synthetic_models_fail_where_liblensfun_fails(entry):
     found = _kernel([entry])
     chosen = _with_real_focal([entry])
@@ -277,6 +279,21 @@ def test_synthetic_models_fail_where_liblensfun_fails(entry):
         return
     if found.fails[0]:
         named = found.fraction[0] * math.hypot(*frame) / 2
-        assert mask.any() and abs(radius_px[mask][0] - named) <= 2
+        assert mask.any()
+        first, settled = _onset(radius_px, mask)
+        assert first - 2 <= named <= settled + 2, (first, settled, named)
     else:
         assert not mask.any(), radius_px[mask][:5]
+
+
+def _onset(radius_px: np.ndarray, mask: np.ndarray, run: int = 8) -> tuple[float, float]:
+    """Where liblensfun's failures start along a row: the first pixel that fails,
+    and the first from which the next ``run`` all fail. Between the two,
+    pixels may fail and pass in turn: liblensfun hands its iteration
+    single-precision coordinates, whose rounding decides, where the
+    iteration is about to stop converging, whether a pixel converges."""
+    failing = np.flatnonzero(mask)
+    settled = next(
+        (i for i in failing if mask[i : i + run].all() or i + run > len(mask)), failing[-1]
+    )
+    return float(radius_px[failing[0]]), float(radius_px[settled])
