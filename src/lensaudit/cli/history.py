@@ -263,11 +263,10 @@ def _drawn(request: tuple[list[dict], str]) -> dict[str, bytes]:
 
 
 def _draw(records: list[dict], title: str) -> dict[str, bytes]:
-    """trend.png and trend.svg, the SVG drawn by a process forked for it while
-    this one draws the PNG (see :class:`~lensaudit.read.parallel.Beside`).
-    The figure is laid out once, as the PNG is drawn (each drawing would lay
-    it out again, a third of its cost): the same PNG, and an SVG laid out
-    with the PNG's measure of its text."""
+    """trend.png and trend.svg, one after the other. The figure is laid out
+    once, as the PNG is drawn (each drawing would lay it out again, a third
+    of its cost): the same PNG, and an SVG laid out with the PNG's measure
+    of its text."""
     figure = trend_figure(records, title=title)
     dpi = figure.get_dpi()
     figure.set_dpi(_FORMATS["trend.png"]["dpi"])
@@ -280,11 +279,7 @@ def _draw(records: list[dict], title: str) -> dict[str, bytes]:
         figure.savefig(stream, **_FORMATS[name])
         return stream.getvalue()
 
-    with parallel.Beside(drawn) as svg:
-        svg.send("trend.svg")
-        figures = {"trend.png": drawn("trend.png")}
-        figures["trend.svg"] = svg.result()
-    return figures
+    return {name: drawn(name) for name in _FORMATS}
 
 
 _FORMATS = {
