@@ -23,7 +23,6 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from conftest import FOLDING_LENS, git_repository, no_child_left
 from damage import FLIPS, flipped
@@ -1110,48 +1109,6 @@ def test_only_the_xml_files_directly_in_the_database_are_versions(tmp_path):
     assert lenses == {"Test 10mm", "Other 10mm"}
     # The link changes no database file: its commit is no revision of it.
     assert result.commits == 2 and [r.counts["audited"] for r in result.revisions] == [2]
-
-
-@settings(max_examples=60, deadline=None)
-@given(st.data())
-def test_each_revision_counted_from_its_parent_is_as_counted_from_scratch(data):
-    from lensaudit.history import introduced as walk_stage
-    from lensaudit.history.audit import BlobAudit, revision
-    from lensaudit.history.commits import Commit
-
-    blobs = {
-        f"blob{n}": BlobAudit(
-            data.draw(st.sampled_from(["", "", "broken"])),
-            tuple(data.draw(st.lists(st.integers(0, 9), min_size=12, max_size=12))),
-            (),
-        )
-        for n in range(6)
-    }
-    names = ["a.xml", "b.xml", "c.xml", "d.xml"]
-    commits, files, maps = [], {}, []
-    for number in range(data.draw(st.integers(1, 12))):
-        parents = tuple(
-            sorted({f"c{data.draw(st.integers(0, number - 1))}" for _ in range(2)})[
-                : data.draw(st.integers(1, 2))
-            ]
-            if number
-            else ()
-        )
-        if maps and data.draw(st.booleans()):  # the same files: the same map
-            files[f"c{number}"] = data.draw(st.sampled_from(maps))
-        else:
-            chosen = data.draw(st.lists(st.sampled_from(names), unique=True, max_size=4))
-            files[f"c{number}"] = {n: data.draw(st.sampled_from(sorted(blobs))) for n in chosen}
-            maps.append(files[f"c{number}"])
-        commits.append(Commit(f"c{number}", parents, "", "", "", ""))
-    for first_parent in (False, True):
-        found = walk_stage.revisions(commits, files, first_parent, {"c0"}, blobs)
-        alone = [
-            revision(c, c.hash == "c0", files[c.hash], blobs)[0]
-            for c in commits
-            if walk_stage.changes_database(c, files, first_parent)
-        ]
-        assert found == alone
 
 
 def test_the_revisions_are_handed_over_as_soon_as_they_are_counted(repo, tmp_path):

@@ -48,36 +48,20 @@ class Interner:
         return BlobAudit(error, counts, idents, tuple(idents[i] for i in folding))
 
 
-#: The column sums of a revision's counts and the error of each of its files that
-#: has one (what :func:`revision` counts).
-Counted = tuple[list[int], dict[str, str]]
-
-
 def revision(
-    commit: Commit,
-    mainline: bool,
-    files: dict[str, str],
-    audits: dict[str, BlobAudit],
-    parent: tuple[dict[str, str], Counted] | None = None,
-) -> tuple[Revision, Counted]:
-    """The revision of ``commit``: its ``files`` ({name: blob id}) counted and
-    summed, and what was counted; from what was counted of the files of a
-    parent (``parent``), changed by the files that differ, where given."""
-    if parent is None:
-        # Column sums at C speed: a revision has dozens of files, a history thousands.
-        totals = list(map(sum, zip(*(audits[blob].counts for blob in files.values()), strict=True)))
-        totals = totals or [0] * len(COUNT_COLUMNS)
-        errors = {name: audits[blob].error for name, blob in files.items() if audits[blob].error}
-    else:
-        before, (totals, errors) = parent
-        totals, errors = list(totals), dict(errors)
-        for name, blob in before.items() - files.items():  # gone, or changed: taken out
-            totals = [t - c for t, c in zip(totals, audits[blob].counts, strict=True)]
-            errors.pop(name, None)
-        for name, blob in files.items() - before.items():  # new, or changed
-            totals = [t + c for t, c in zip(totals, audits[blob].counts, strict=True)]
-            if audits[blob].error:
-                errors[name] = audits[blob].error
-    counts = dict(zip(COUNT_COLUMNS, totals, strict=True))
-    shown = tuple(f"{name}: {errors[name]}" for name in sorted(errors))
-    return Revision(commit, mainline, len(files), counts, shown), (totals, errors)
+    commit: Commit, mainline: bool, files: dict[str, str], audits: dict[str, BlobAudit]
+) -> Revision:
+    """The revision of ``commit``: its ``files`` ({name: blob id}) counted and summed."""
+    names = sorted(files)
+    file_audits = [audits[files[name]] for name in names]
+    # Column sums at C speed: a revision has dozens of files, a history thousands.
+    totals = list(map(sum, zip(*(audit.counts for audit in file_audits), strict=True)))
+    totals = totals or [0] * len(COUNT_COLUMNS)
+    errors = [
+        f"{name}: {audit.error}"
+        for name, audit in zip(names, file_audits, strict=True)
+        if audit.error
+    ]
+    return Revision(
+        commit, mainline, len(files), dict(zip(COUNT_COLUMNS, totals, strict=True)), tuple(errors)
+    )

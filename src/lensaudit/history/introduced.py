@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from .. import read
 from ..read.records import ROW_FIELDS, STATUS_OK, DistortionEntry
-from .audit import BlobAudit, Counted, revision
+from .audit import BlobAudit, revision
 from .commits import Commit
 from .results import IntroducedEntry, Revision
 
@@ -155,24 +155,12 @@ def revisions(
     mainline: set[str],
     audits: dict[str, BlobAudit],
 ) -> list[Revision]:
-    """The revisions of the commits that change the database, counted: each
-    from what was counted of its first parent's files where they were (the
-    same files are the same map), else from scratch."""
-    counted: dict[int, Counted] = {}  # by the id of a map of files
-    found = []
-    for commit in commits:
-        if not changes_database(commit, files, first_parent):
-            continue
-        mine = files[commit.hash]
-        parents = parents_of(commit, first_parent)
-        before = files[parents[0]] if parents else {}
-        base = counted.get(id(before))
-        parent = (before, base) if base is not None else None
-        found_revision, counted[id(mine)] = revision(
-            commit, commit.hash in mainline, mine, audits, parent
-        )
-        found.append(found_revision)
-    return found
+    """The revisions of the commits that change the database, counted."""
+    return [
+        revision(commit, commit.hash in mainline, files[commit.hash], audits)
+        for commit in commits
+        if changes_database(commit, files, first_parent)
+    ]
 
 
 def walk(
