@@ -1035,7 +1035,8 @@ def summaries_by_piece(contents: list[bytes]) -> tuple[int, list[int]]:
             read.read_bytes(data, "f.xml", pieces=pieces)  # learns its pieces, as the history
             continue
         by_pieces += 1
-        if versions_stage._pieces_summary(rows, memo, solved) != whole:
+        parts = versions_stage._piece_parts(rows, memo, solved)
+        if versions_stage.Summary("", *versions_stage._added(parts)) != whole:
             wrong.append(number)
     return by_pieces, wrong
 

@@ -140,24 +140,18 @@ def _rows_summary(
 
 #: The counts of a :class:`Summary` of no rows.
 _NO_COUNTS = _rows_summary([], {"r_max": [], "r_normalized_paper": [], "folds_in_image": []})[0]
-#: Pieces whose summary (:func:`_pieces_summary`) is kept at most.
+#: Pieces whose summary (:func:`_piece_parts`) is kept at most.
 MEMO_PIECES = 1 << 16
-
-
-def _pieces_summary(
-    pieces: list[list[tuple]], memo: dict[int, tuple], solved: dict[tuple, tuple]
-) -> Summary:
-    """The summary of a file version read as pieces (:func:`lensaudit.read.read_pieces`):
-    that of each piece's rows, added, each kept in ``memo`` by its rows (the
-    same list for the same piece) and solved through the solver's memo."""
-    return Summary("", *_added(_piece_parts(pieces, memo, solved)))
 
 
 def _piece_parts(
     pieces: list[list[tuple]], memo: dict[int, tuple], solved: dict[tuple, tuple]
 ) -> list[tuple[tuple[int, ...], list[tuple], tuple[int, ...]]]:
-    """(counts, identities, folding) of the rows of each piece that has any (see
-    :func:`_pieces_summary`)."""
+    """(counts, identities, folding) of the rows of each piece of a file version
+    read as pieces (:func:`lensaudit.read.read_pieces`) that has any: the
+    version's are theirs added (:func:`_added`). Each is kept in ``memo`` by
+    its rows (the same list for the same piece), and solved through the
+    solver's memo."""
     if len(memo) > MEMO_PIECES:
         memo.clear()
     parts = []
