@@ -361,3 +361,24 @@ def test_the_solver_memo_answers_each_entry_as_solving_it_does(entries):
 def test_the_solver_memo_tells_zeros_apart():
     pack = struct.Struct("<8d").pack
     assert pack(0.0, *[1.0] * 7) != pack(-0.0, *[1.0] * 7)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=3000), st.binary(max_size=3000), st.binary(max_size=3000))
+def test_the_common_start_and_end_of_two_documents_are_found(head, a, b):
+    from lensaudit.read import xml
+
+    def naive_prefix(x: bytes, y: bytes) -> int:
+        n = 0
+        while n < min(len(x), len(y)) and x[n] == y[n]:
+            n += 1
+        return n
+
+    first, second = head + a, head + b + head
+    assert xml._common_prefix(first, second) == naive_prefix(first, second)
+    limit = min(len(first), len(second))
+    assert xml._common_suffix(first, second, limit) == naive_prefix(first[::-1], second[::-1])
+    short = min(7, limit)
+    assert xml._common_suffix(first, second, short) == min(
+        short, naive_prefix(first[::-1], second[::-1])
+    )

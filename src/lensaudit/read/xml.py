@@ -130,14 +130,12 @@ def parse(
     a time. A file that is not well-formed is visited again, from the start,
     by a new visitor, as far as libxml2's recovery mode can read it.
 
-    With ``pieces``, the top-level ``<lens>`` elements it has met before are
-    not parsed again (see :class:`Pieces`).
+    With ``pieces``, the top-level ``<lens>``, ``<camera>`` and ``<mount>``
+    elements it has met before are not parsed again (see :class:`Pieces`).
     """
     from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
-    if b"\r" in data:  # XML's line-end normalization, done first so lines count
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    found = unknown_reference(data) if b"&" in data and b"<!DOCTYPE" in data else None
+    data, found = _normalized(data)
     if found is not None:
         return _recovered(data, visitor, read, *found)
     lines = _Lines(data) if data.count(b"\n") >= _LIBXML2_LINES else None
@@ -169,11 +167,18 @@ def read_pieces(data: bytes, visitor: Callable[[], V], pieces: Pieces) -> list[A
     """The tables of each piece of a document that :func:`parse` with
     ``pieces`` reads as nothing but those pieces (see :meth:`Pieces.placed`),
     as ``visitor().taken()`` gives them, in order; None for any other."""
-    if b"\r" in data:  # as parse() reads it
+    data, found = _normalized(data)
+    return pieces.placed(data, visitor) if found is None else None
+
+
+def _normalized(data: bytes) -> tuple[bytes, tuple[int, int, str] | None]:
+    """A document with XML's line-end normalization done (first, so that lines
+    count), and where it refers to an entity liblensfun does not know (see
+    :func:`unknown_reference`), or None."""
+    if b"\r" in data:
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    if b"&" in data and b"<!DOCTYPE" in data and unknown_reference(data) is not None:
-        return None
-    return pieces.placed(data, visitor)
+    found = unknown_reference(data) if b"&" in data and b"<!DOCTYPE" in data else None
+    return data, found
 
 
 def _checked_root(root: Any, visiting: V, lines: _Lines | None) -> tuple[Parsed, V]:
@@ -462,38 +467,33 @@ _BETWEEN = re.compile(rb"(?:[ \t\n]|<!--(?:[^-]|-[^-])*-->)*")
 
 def _common_prefix(a: bytes, b: bytes) -> int:
     """The length of the longest start ``a`` and ``b`` have in common."""
-    limit = min(len(a), len(b))
-    low, step = 0, 1024
-    while low < limit:  # a[:low] == b[:low]
-        high = min(low + step, limit)
-        if a[low:high] != b[low:high]:
-            break
-        low, step = high, 2 * step
-    else:
-        return limit
-    while high - low > 1:  # a[low:high] != b[low:high]
-        middle = (low + high) // 2
-        if a[low:middle] == b[low:middle]:
-            low = middle
-        else:
-            high = middle
-    return low
+    return _longest(lambda low, high: a[low:high] == b[low:high], min(len(a), len(b)))
 
 
 def _common_suffix(a: bytes, b: bytes, limit: int) -> int:
-    """The length of the longest end ``a`` and ``b`` have in common, up to ``limit``."""
+    """The length of the longest end ``a`` and ``b`` have in common, up to
+    ``limit`` (no more than the length of either)."""
     end_a, end_b = len(a), len(b)
+    return _longest(
+        lambda low, high: a[end_a - high : end_a - low] == b[end_b - high : end_b - low], limit
+    )
+
+
+def _longest(same: Callable[[int, int], bool], limit: int) -> int:
+    """The largest length up to ``limit`` whose bytes are all the same, where
+    ``same(low, high)`` says whether those from ``low`` to ``high`` are: in
+    runs that double, then halving the run that is not."""
     low, step = 0, 1024
-    while low < limit:  # the last low bytes are the same
+    while low < limit:  # the first low bytes are the same
         high = min(low + step, limit)
-        if a[end_a - high : end_a - low] != b[end_b - high : end_b - low]:
+        if not same(low, high):
             break
         low, step = high, 2 * step
     else:
         return limit
-    while high - low > 1:
+    while high - low > 1:  # those from low to high are not
         middle = (low + high) // 2
-        if a[end_a - middle : end_a - low] == b[end_b - middle : end_b - low]:
+        if same(low, middle):
             low = middle
         else:
             high = middle
