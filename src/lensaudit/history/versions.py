@@ -261,9 +261,9 @@ def _read_batch(
     solved: dict[tuple, tuple],
     batch: list[str],
 ) -> tuple[list[tuple], list]:
-    """The summaries of one process's share of a round, as plain data: the
-    identities met, each once, and the summaries, their identities given
-    as positions in that list. ``pieces``, ``memo`` and ``solved`` are the
+    """The summaries of a batch of versions (one file's, oldest first), as
+    plain data: the identities met, each once, and the summaries, their
+    identities given as positions in that list. ``pieces``, ``memo`` and ``solved`` are the
     reader's memo, that of the summary of each piece, and the solver's."""
     known: dict[tuple, int] = {}  # identity -> its position among those met
     numbered: dict[int, tuple[list[tuple], list[int]]] = {}  # of a piece's identities
