@@ -111,6 +111,35 @@ def test_text_split_by_a_comment_is_read_as_liblensfun_reads_it(write_xml):
     assert broken["maker"] == theirs["Broken ratio"]["maker"] == "st"
 
 
+@pytest.mark.parametrize("reference", ["&#xD800;", "&#55296;", "&#x000dfff;", "&#57343;"])
+@pytest.mark.parametrize("where", ["maker", "attribute"])
+def test_a_reference_to_a_surrogate_leaves_a_broken_file_whose_entries_are_kept(
+    write_xml, reference, where
+):
+    # No XML text may hold a surrogate: the file is not well-formed, and what
+    # recovery mode reads of it must still be text (an entry row each).
+    write_xml(lens_xml('<distortion model="poly3" focal="10" k1="-0.01"/>'), "good.xml")
+    text = TWO_LENSES.format(aspect="4:3", crop="1.5", real_focal="")
+    if where == "maker":
+        text = text.replace("<maker>Test</maker>", f"<maker>T{reference}</maker>", 1)
+    else:
+        text = text.replace('focal="10" a=', f'focal="10" note="{reference}" a=', 1)
+    path = write_xml(text, "broken.xml")
+    found = scan_csv(path.parent)
+    by_file: dict[str, list[str]] = {}
+    for row in found:
+        by_file.setdefault(row["file"], []).append(row["status"])
+    assert by_file == {"broken.xml": ["xml_error"] * 3, "good.xml": ["ok"]}
+    broken = [row for row in found if row["file"] == "broken.xml"]
+    line = 3 if where == "maker" else 8
+    assert f"at line {line}, column" in broken[0]["message"]
+    assert [row["lens"] for row in broken[1:]] == ["Broken ratio", "Fine"]
+    for command in (["check"], ["report", "-o", str(path.parent.parent / "out")]):
+        process = run_cli(*command, str(path.parent), "--no-cache")
+        stderr = process.stderr.decode("utf-8", "replace")
+        assert process.returncode in (0, 1) and "Traceback" not in stderr, stderr
+
+
 # --- what a file is ------------------------------------------------------------
 
 

@@ -650,7 +650,7 @@ def _recovered(
 
     visiting = visitor()
     try:
-        root = etree.fromstring(data, parser(recover=True))
+        root = etree.fromstring(_without_surrogates(data), parser(recover=True))
     except etree.XMLSyntaxError:
         root = None
     if root is not None:
@@ -660,6 +660,32 @@ def _recovered(
         _judge_root(root, visiting, None)
         _visit_tree(root, visiting, read, _line_getter(None, root))
     return Parsed(STATUS_XML_ERROR, line, column, problem), visiting
+
+
+#: A character reference, its number in group 1 (hexadecimal after an "x").
+_CHARACTER_REFERENCE = re.compile(rb"&#(x[0-9a-fA-F]+|[0-9]+);")
+_REPLACEMENT_REFERENCE = b"&#xFFFD;"
+
+
+def _without_surrogates(data: bytes) -> bytes:
+    """A document with each character reference to a surrogate (U+D800 to
+    U+DFFF, which no XML text may hold) made a reference to U+FFFD instead:
+    recovery mode would keep such a character as bytes that are not UTF-8, and
+    no text could then be read from the element or attribute that holds it.
+    Lines are kept as they are."""
+    if b"&#" not in data:
+        return data
+
+    def replaced(match: re.Match[bytes]) -> bytes:
+        number = match.group(1)
+        hexadecimal = number[:1] == b"x"
+        digits = (number[1:] if hexadecimal else number).lstrip(b"0")
+        if len(digits) > 5:  # beyond U+DFFF (and int() of any length is never asked)
+            return match.group(0)
+        code = int(digits or b"0", 16 if hexadecimal else 10)
+        return _REPLACEMENT_REFERENCE if 0xD800 <= code <= 0xDFFF else match.group(0)
+
+    return _CHARACTER_REFERENCE.sub(replaced, data)
 
 
 def _use_local_names(root: etree._Element) -> None:
