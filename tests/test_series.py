@@ -8,6 +8,7 @@ import math
 import random
 import subprocess
 import sys
+import warnings
 from fractions import Fraction
 from pathlib import Path
 
@@ -138,6 +139,30 @@ def test_an_overflowing_series_is_not_judged_and_does_not_warn(tmp_path, recwarn
     result = check(database(tmp_path, lines))
     assert outliers(result) == []
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+HUGE = {
+    # One entry whose displacement is infinite: a series of one, not judged.
+    "alone": (['<distortion model="poly3" focal="10" k1="1e308"/>'], []),
+    # A finite displacement near the largest double in a smooth series: the
+    # spread of the others around it times its factor overflows. It is the
+    # outlier; its neighbours, whose spreads hold it, are not.
+    "in the middle": (
+        [
+            f'<distortion model="ptlens" focal="{focal}" a="0.01" b="-0.02" c="{c}"/>'
+            for focal, c in ((10, 0.01), (12, 0.01), (14, 1e308), (16, 0.01), (18, 0.01))
+        ],
+        [("Zoom 0", 9, 14.0)],
+    ),
+}
+
+
+@pytest.mark.parametrize(("lines", "expected"), HUGE.values(), ids=HUGE.keys())
+def test_a_series_with_a_huge_value_gives_no_runtime_warning(tmp_path, lines, expected):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = check(database(tmp_path, lines))
+    assert outliers(result) == expected
 
 
 @pytest.mark.parametrize(

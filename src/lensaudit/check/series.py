@@ -179,18 +179,23 @@ def _outliers(
     )
     # The spread of each series without each entry: the range of the others,
     # from the two largest and two smallest values of each series and radius.
+    # A series with a value that is not finite is not judged (``judged``): what
+    # its spread comes to does not matter, and is worked out without a word.
     spread = np.zeros(count)
-    for k in range(len(RADII)):
-        by_value = np.lexsort((profile[:, k], group))  # within each series, by value
-        values = profile[by_value, k]
-        rank = np.empty(count, dtype=int)
-        rank[by_value] = np.arange(count)
-        lowest, highest = start, start + size - 1  # positions in ``values``
-        top = np.where(rank == highest, values[np.maximum(highest - 1, 0)], values[highest])
-        bottom = np.where(rank == lowest, values[np.minimum(lowest + 1, count - 1)], values[lowest])
-        spread = np.maximum(spread, top - bottom)
     factor = np.where(first, SHORT_END_FACTOR, SPREAD_FACTOR)
-    flagged = judged & (deviation >= MIN_DEVIATION) & (deviation >= factor * spread)
+    with np.errstate(all="ignore"):
+        for k in range(len(RADII)):
+            by_value = np.lexsort((profile[:, k], group))  # within each series, by value
+            values = profile[by_value, k]
+            rank = np.empty(count, dtype=int)
+            rank[by_value] = np.arange(count)
+            lowest, highest = start, start + size - 1  # positions in ``values``
+            top = np.where(rank == highest, values[np.maximum(highest - 1, 0)], values[highest])
+            bottom = np.where(
+                rank == lowest, values[np.minimum(lowest + 1, count - 1)], values[lowest]
+            )
+            spread = np.maximum(spread, top - bottom)
+        flagged = judged & (deviation >= MIN_DEVIATION) & (deviation >= factor * spread)
     found = []
     for p in np.flatnonzero(flagged).tolist():
         predictors = (near[p],) if first[p] else (near[p], far[p])
