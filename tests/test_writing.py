@@ -80,6 +80,25 @@ def test_every_command_refuses_to_write_over_or_into_an_input(capsys, db, words)
     refused(capsys, db, *(w.format(db=db) for w in words))
 
 
+@pytest.mark.parametrize(
+    "name", ["entries.csv", "report.html", "fig5_r_normalized.svg", "paper_comparison.md"]
+)
+def test_report_refuses_an_input_file_that_it_would_replace_in_its_directory(
+    capsys, db, tmp_path, name
+):
+    # A database file given by a name the report writes, in the report's directory:
+    # --force replaces report files, never an input.
+    out = tmp_path / "out"
+    out.mkdir()
+    given = out / name
+    given.write_text(FOLDING)
+    extra = ["--paper"] if name == "paper_comparison.md" else []
+    code, err = run(capsys, "report", given, "-o", out, "--force", *extra)
+    assert code == 2 and f"{given} is an input" in err and "nothing read or written" in err
+    assert given.read_text() == FOLDING
+    assert [p.name for p in out.iterdir()] == [name]
+
+
 def test_check_refuses_to_write_into_its_baseline_directory(capsys, db, tmp_path):
     baseline = tmp_path / "baseline"
     shutil.copytree(db, baseline)

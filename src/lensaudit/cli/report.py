@@ -9,6 +9,7 @@ import click
 from ..commands import cycle_collector_off
 from ..read import LoadError
 from ..report import ReportExistsError, audit, drawing, write_report
+from ..report.writer import planned_files
 from .options import cache_option, database_paths, fail, refuse_writing_inputs
 
 
@@ -56,7 +57,9 @@ def report(
 
     Existing report files in DIR are replaced only with --force.
     """
-    refuse_writing_inputs([output_dir], paths)
+    # The directory, and each file it receives: an input may be in the directory.
+    outputs = [output_dir, *(output_dir / name for name in planned_files(paper))]
+    refuse_writing_inputs(outputs, paths)
     values = None
     if paper:
         # numpy: `report --help` imports no heavy module (tests/test_imports.py)
