@@ -506,6 +506,29 @@ def test_writing_the_bundled_database_is_refused(runner):
     assert result.exit_code == 2 and "give the database PATH" in result.output
 
 
+@pytest.mark.parametrize("given", ["directory", "file", "link"])
+def test_writing_the_bundled_database_by_its_path_is_refused(runner, tmp_path, monkeypatch, given):
+    # A stand-in for lensfunpy's database, so that nothing installed is at stake.
+    from lensaudit.read import paths
+
+    bundled = tmp_path / "db_files"
+    bundled.mkdir()
+    path = bundled / "one.xml"
+    path.write_text(
+        lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    )
+    before = path.read_bytes()
+    monkeypatch.setattr(paths, "bundled_database_path", lambda: bundled)
+    (tmp_path / "link").symlink_to(bundled)
+    target = {"directory": bundled, "file": path, "link": tmp_path / "link"}[given]
+    result = runner.invoke(main, ["fix", str(target), "--write", "--no-cache"])
+    assert result.exit_code == 2, result.output
+    assert "is the database bundled with lensfunpy, which is not written" in result.output
+    assert path.read_bytes() == before
+    # Without --write, the same database is refitted as any other.
+    assert runner.invoke(main, ["fix", str(target), "--no-cache"]).exit_code == 0
+
+
 def test_the_command_prints_a_diff_and_writes_nothing(runner, tmp_path):
     xml = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
     (tmp_path / "db").mkdir()

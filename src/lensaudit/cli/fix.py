@@ -14,6 +14,7 @@ from ..formats.csv_format import write_rows
 from ..formats.table import text_table
 from ..pipeline import run
 from ..read import LoadError
+from ..read.paths import in_bundled_database
 from ..version import __version__
 from ..writing import WriteError
 from ..xmlpatch import PatchError, unified_diff
@@ -168,6 +169,12 @@ def _read_audit(paths: tuple[Path, ...], cache: bool, write: bool) -> Audit:
         fail(
             "--write patches files in place: give the database PATH to patch "
             "(the database bundled with lensfunpy is not written)"
+        )
+    bundled = next((p for p in audit.source.paths if in_bundled_database(p)), None)
+    if write and bundled is not None:
+        fail(
+            f"--write patches files in place: {bundled} is the database bundled with "
+            "lensfunpy, which is not written; patch a copy of it instead"
         )
     return audit
 

@@ -56,6 +56,15 @@ def bundled_database_path() -> Path:
     return path
 
 
+def in_bundled_database(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` (by any name) is the database bundled with lensfunpy, or in it."""
+    try:
+        bundled = Path(os.path.realpath(bundled_database_path()))
+    except LoadError:
+        return False
+    return Path(os.path.realpath(path)).is_relative_to(bundled)
+
+
 def lensfunpy_version() -> str:
     """Installed lensfunpy version, or "" when it is not installed.
 
