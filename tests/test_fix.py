@@ -15,6 +15,7 @@ import json
 import math
 import re
 import shutil
+import warnings
 from fractions import Fraction
 from pathlib import Path
 
@@ -527,6 +528,36 @@ def test_writing_the_bundled_database_by_its_path_is_refused(runner, tmp_path, m
     assert path.read_bytes() == before
     # Without --write, the same database is refitted as any other.
     assert runner.invoke(main, ["fix", str(target), "--no-cache"]).exit_code == 0
+
+
+@pytest.mark.parametrize(
+    ("distortion", "options"),
+    [
+        ('<distortion model="poly3" focal="10" k1="1e308"/>', []),
+        ('<distortion model="ptlens" focal="11" a="1e308" b="-0.002" c="0.005"/>', []),
+        ('<distortion model="poly3" focal="16" k1="-0.11"/>', ["--margin", "1e308"]),
+        ('<distortion model="poly3" focal="16" k1="-0.11"/>', ["--target", "1e308"]),
+    ],
+)
+def test_values_near_the_largest_double_are_no_solution_without_a_warning(
+    runner, tmp_path, distortion, options
+):
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "one.xml").write_text(lens_xml(distortion))
+    found = {}
+    for output_format in ("csv", "json", "table"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a warning would end the command in a traceback
+            result = runner.invoke(
+                main, ["fix", str(tmp_path / "db"), "-f", output_format, *options]
+            )
+        assert result.exit_code == 0, result.output
+        found[output_format] = result.output
+    (row,) = csv.DictReader(io.StringIO(found["csv"]))
+    assert row["status"] == "no_solution" and row["k1_new"] == row["a_new"] == ""
+    (entry,) = json.loads(found["json"])["entries"]
+    assert entry["status"] == "no_solution"
+    assert "no_solution" in found["table"]
 
 
 def test_the_command_prints_a_diff_and_writes_nothing(runner, tmp_path):

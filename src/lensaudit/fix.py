@@ -182,7 +182,8 @@ class FixResult:
     def record(self) -> dict[str, Any]:
         """The result as one flat row (see :data:`RECORD_COLUMNS`)."""
         old = dict(zip(self.names, self.old, strict=True))
-        new = dict(zip(self.names, self.new_texts, strict=True))
+        # No new texts where no coefficients were found (no_solution): empty fields.
+        new = dict(zip(self.names, self.new_texts, strict=True)) if self.new_texts else {}
         entry = self.entry
         row: dict[str, Any] = {
             "file": entry.file,

@@ -313,12 +313,15 @@ class _Program:
             blocks.append(-reach_row[None, :])
             needed = self.goal.reach * (1 + REACH_SLACK)
             limits.append(np.array([P.polyval(radius, self.old_curve) - needed]))
+        rows, bounds = np.vstack(blocks), np.concatenate(limits)
+        if not (np.isfinite(rows).all() and np.isfinite(bounds).all()):
+            return None  # values beyond the floats (a coefficient near the largest double)
         objective = np.zeros(count + 1)
         objective[-1] = 1.0
         solution = linprog(
             objective,
-            A_ub=np.vstack(blocks),
-            b_ub=np.concatenate(limits),
+            A_ub=rows,
+            b_ub=bounds,
             bounds=[(None, None)] * count + [(0, None)],
             method="highs",
         )
@@ -363,22 +366,28 @@ def best_fit(model: str, coefficients: Sequence[float], goal: Goal) -> Fit | Non
     """The linear program's best coefficients over the radius T, verified exactly.
 
     None when no coefficients of the model meet the goal (or the program
-    cannot find them within its refinements).
+    cannot find them within its refinements), and for a goal or coefficients
+    beyond what floats can pose the program with (a margin or a coefficient
+    near the largest double).
     """
-    program = _Program(model, coefficients, goal)
-    if math.isinf(goal.target):
-        candidates = [math.inf]
-    else:
-        candidates = _search_radius(program, goal.target)
-    for radius in candidates:
-        extra: list[float] = []
-        for _ in range(_REFINEMENTS):
-            fit = program.solve(radius, extra)
-            if fit is None:
-                break
-            if judge(model, fit.coefficients, goal).meets_goal:
-                return fit
-            extra += program.slope_minimum(fit.coefficients, radius)
+    beyond = math.isfinite(goal.target) and not math.isfinite(SEARCH_SPAN * goal.target)
+    if beyond or not math.isfinite(goal.reach * (1 + REACH_SLACK)):
+        return None
+    with np.errstate(all="ignore"):  # a program that overflows is not solved (see solve)
+        program = _Program(model, coefficients, goal)
+        if math.isinf(goal.target):
+            candidates = [math.inf]
+        else:
+            candidates = _search_radius(program, goal.target)
+        for radius in candidates:
+            extra: list[float] = []
+            for _ in range(_REFINEMENTS):
+                fit = program.solve(radius, extra)
+                if fit is None:
+                    break
+                if judge(model, fit.coefficients, goal).meets_goal:
+                    return fit
+                extra += program.slope_minimum(fit.coefficients, radius)
     return None
 
 
