@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+import warnings
 
 import pytest
 from click.testing import CliRunner
@@ -104,6 +105,11 @@ def test_an_entry_that_was_not_audited_cannot_be_plotted(runner, small_db, tmp_p
         (["warp", "slr-tokina.xml:17", "--size", "big"], "WIDTHxHEIGHT"),
         (["warp", "slr-tokina.xml:17", "--scale", "-1"], "--scale must be"),
         (["map", "--range", "1", "-1"], "MIN < MAX"),
+        (["map", "--range", "-1e308", "1e308"], "from -1e300 to 1e300"),
+        (["map", "--range", "-inf", "1"], "from -1e300 to 1e300"),
+        (["map", "--range", "0", "nan"], "MIN < MAX"),
+        (["map", "--k3", "0", "--k3", "1e308"], "--k3 0 1e+308: expected numbers"),
+        (["map", "--k3", "nan"], "from -1e300 to 1e300"),
     ],
 )
 def test_bad_requests_exit_2_with_a_message(runner, tmp_path, arguments, message):
@@ -125,6 +131,16 @@ def test_missing_database_is_an_input_error(runner, tmp_path):
         ["plot", "curve", "x.xml:3", "--db", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")],
     )
     assert result.exit_code == 2 and "no such file" in result.output
+
+
+def test_a_map_at_the_ends_of_its_range_is_drawn_without_a_warning(runner, tmp_path):
+    out = tmp_path / "map.png"
+    words = ["plot", "map", "--range", "-1e300", "1e300", "--k3", "-1e300", "--k3", "1e300"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = runner.invoke(main, [*words, "--resolution", "5", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert png_size(out)[0] > 100
 
 
 def test_map_writes_a_figure(runner, tmp_path):

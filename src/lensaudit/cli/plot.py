@@ -252,6 +252,10 @@ def warp(
     _save(figures.warp_figure(result, inset, caption), output)
 
 
+#: The largest k1, k2 or k3 a map takes: D'(r)'s coefficients (7 k3) stay finite.
+_LARGEST_COEFFICIENT = 1e300
+
+
 @plot.command(name="map")
 @_output
 @click.option(
@@ -290,6 +294,10 @@ def map_command(
     _check_format(output)
     if not k_range[0] < k_range[1]:
         fail("--range needs MIN < MAX")
+    for option, values in (("--range", k_range), ("--k3", k3_values)):
+        if not all(abs(value) <= _LARGEST_COEFFICIENT for value in values):
+            shown = " ".join(f"{value:g}" for value in values)
+            fail(f"{option} {shown}: expected numbers from -1e300 to 1e300")
     from ..report import figures  # numpy and matplotlib: --help stays quick
     from ..report.rmax_map import DEFAULT_K3, rmax_map  # numpy: --help stays quick
 
