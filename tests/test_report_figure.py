@@ -252,3 +252,22 @@ def test_figure5_of_extreme_values_is_drawn_without_warnings(values):
         figures.svg_text(figure)
     left, right = figure.axes[0].get_xlim()
     assert 0 < left < 1 < right < math.inf
+
+
+@pytest.mark.parametrize("values", [[4.5], [0.9, 3.0], [2.0, 3.0, 40.0], [1e-30, 1e30]])
+def test_every_tick_label_of_figure5_is_plain_text(values):
+    # Mathtext (a label in $...$) looks up fonts of its own, and matplotlib
+    # says on stderr when they are missing: every label is a plain number.
+    data = histogram.from_values(np.array(values), np.array(values) * 5)
+    figure = figures.figure5(data)
+    figure.canvas.draw()
+    labels = [
+        label.get_text()
+        for axes in figure.axes[:2]
+        for axis in (axes.xaxis, axes.yaxis)
+        for label in (*axis.get_majorticklabels(), *axis.get_minorticklabels())
+    ]
+    assert any(labels) and not [label for label in labels if "$" in label]
+    minor = [label.get_text() for label in figure.axes[0].yaxis.get_minorticklabels()]
+    if len(values) == 1:  # one entry: the y axis spans less than a decade, its 2 is labelled
+        assert "2" in minor

@@ -20,7 +20,7 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.font_manager import FontProperties
 from matplotlib.patches import Circle
-from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+from matplotlib.ticker import FuncFormatter, LogFormatter, LogLocator, NullFormatter
 
 from .histogram import BINS_PER_DECADE
 
@@ -137,6 +137,11 @@ def _bars(axes, histogram: Histogram, counts: np.ndarray, colour: str, label: st
     plain = FuncFormatter(lambda value, _: f"{value:g}")
     axes.xaxis.set_major_formatter(plain)
     axes.yaxis.set_major_formatter(plain)
+    # On an axis of few decades matplotlib labels some minor ticks too: in plain
+    # text as well (its default writes them as mathtext, which looks up fonts
+    # of its own and says so on stderr where they are missing).
+    axes.xaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
+    axes.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     # Minor ticks at 2 and 5 times each power of ten: the 1-2-5 marks read
     # as well as eight per decade, and each tick is a costly matplotlib object.
     axes.xaxis.set_minor_locator(LogLocator(subs=MINOR_TICKS))
