@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import os
 import socket
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -406,3 +408,36 @@ def test_no_output_format_leaks_environment_or_traceback(write_xml, monkeypatch)
         assert_clean_exit(arguments, result)
         assert "Traceback" not in result.output and SECRET not in result.output
     assert path.exists()
+
+
+@pytest.mark.parametrize("element", ["focal", "distortion"])
+def test_an_element_with_a_third_of_a_million_attributes_is_judged_at_once(write_xml, element):
+    # Each lxml attribute value is found by a search of the element's attributes:
+    # reading them all would take time quadratic in their number (hours here).
+    many = " ".join(f'x{i}="1"' for i in range(300_000))
+    if element == "focal":
+        text = lens_xml(FOLDING).replace("<mount>", f'<focal min="10" {many}/><mount>', 1)
+    else:
+        text = lens_xml(FOLDING.replace("/>", f" {many}/>"))
+    path = write_xml(text)
+    process = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "check", "--no-cache", "-f", "json", str(path)],
+        capture_output=True,
+        timeout=120,
+    )
+    assert process.returncode == 1, process.stderr
+    found = json.loads(process.stdout)["findings"]
+    refusal = [f for f in found if f["code"] == "liblensfun-refuses"]
+    message = refusal[0]["message"]
+    assert len(refusal) == 1 and "attribute x0=" in message and f"on <{element}>" in message
+    assert [f["code"] for f in found if f["code"].startswith("fold")] == ["fold-in-image"]
+
+
+def test_an_apostrophe_inside_a_word_opens_no_quoted_value():
+    from lensaudit.check.result import QUOTED_LIMIT, clip
+
+    text = "liblensfun (Lensfun master's) stops reading at line 6: bad attribute x0='1' on <focal>"
+    assert clip(text) == text
+    long = "9" * 500
+    shortened = f"a (b's) c x='{'9' * QUOTED_LIMIT}\u2026' overflows"
+    assert clip(f"a (b's) c x='{long}' overflows") == shortened

@@ -53,7 +53,9 @@ FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
 NAME_LIMIT = 80
 MESSAGE_LIMIT = 400
 QUOTED_LIMIT = 40
-_QUOTED = re.compile(rf"'([^']{{{QUOTED_LIMIT}}})[^']{{2,}}'")
+#: A quoted value longer than QUOTED_LIMIT: its opening quote follows no letter
+#: or digit, so that the apostrophe of "master's" opens nothing.
+_QUOTED = re.compile(rf"(?<!\w)'([^']{{{QUOTED_LIMIT}}})[^']{{2,}}'")
 
 
 class CheckError(LoadError):

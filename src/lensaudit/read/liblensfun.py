@@ -255,10 +255,13 @@ def start_problem(name: str, parent: str | None, attributes: Any, depth: int) ->
         if parent is not None:
             return f"<{name}> in the wrong place (inside <{parent}>)"
         version = 0
-        for attribute, value in attributes.items():
+        # By name, each value fetched only where needed: lxml fetches a value by
+        # searching the element's attributes, so that items() takes time
+        # quadratic in their number (a start tag with 100,000 of them).
+        for attribute in attributes.keys():
             if attribute != "version":
-                return f"bad attribute {_shown(attribute, value)} on <{name}>"
-            version = atoi(value)
+                return f"bad attribute {_shown(attribute, attributes[attribute])} on <{name}>"
+            version = atoi(attributes[attribute])
         if version not in VERSIONS:
             return f"database version {version} is not one of 0, 1, 2"
         return None
@@ -273,14 +276,14 @@ def start_problem(name: str, parent: str | None, attributes: Any, depth: int) ->
         if len(attributes):
             return f"<{name}> takes no attributes (has {_clip(next(iter(attributes)))}=)"
         return None
-    for attribute, value in attributes.items():
+    for attribute in attributes.keys():  # by name, as above
         if attribute not in allowed:
             if unknown_attributes:
                 return f"unknown attribute {_clip(attribute)}= on <{name}>"
-            return f"bad attribute {_shown(attribute, value)} on <{name}>"
+            return f"bad attribute {_shown(attribute, attributes[attribute])} on <{name}>"
         values = allowed[attribute]
-        if values is not None and value not in values:
-            return f"bad attribute {_shown(attribute, value)} on <{name}>"
+        if values is not None and attributes[attribute] not in values:
+            return f"bad attribute {_shown(attribute, attributes[attribute])} on <{name}>"
     return None
 
 

@@ -98,6 +98,24 @@ _NO_LENS = LensContext(
 _NAMED = frozenset(("maker", "model", "type", "cropfactor", "aspect-ratio"))
 
 
+#: Attributes of a lens's child beyond which it is kept as its markup (see _attributes_of).
+_MANY_ATTRIBUTES = 64
+
+
+def _attributes_of(child: etree._Element) -> tuple[tuple[str, str], ...]:
+    """A lens child's attributes as sorted (name, value) pairs. lxml finds each
+    value by searching the element's attributes, so that reading them all
+    takes time quadratic in their number: an element with more than
+    :data:`_MANY_ATTRIBUTES` (liblensfun takes three at most) is kept as its
+    markup instead, one pair named "" (its attributes in the order written)."""
+    names = child.keys()
+    if len(names) <= _MANY_ATTRIBUTES:
+        return tuple(sorted(child.items()))
+    from lxml import etree  # lxml: only to parse XML, which a warm scan does not
+
+    return (("", etree.tostring(child, encoding="unicode", with_tail=False)),)
+
+
 def read_lens(
     element: etree._Element, index: int, line: int, line_of: LineOf
 ) -> tuple[tuple, LensContext]:
@@ -119,7 +137,7 @@ def read_lens(
             texts[tag] = text_of(child)
             if tag in ("maker", "model"):
                 continue
-        content.append((tag, tuple(sorted(child.attrib.items())), " ".join(text_of(child).split())))
+        content.append((tag, _attributes_of(child), " ".join(text_of(child).split())))
     problems = []
     crop_text = texts.get("cropfactor")
     crop_factor = DEFAULT_CROP_FACTOR
