@@ -305,6 +305,23 @@ def test_the_same_bytes_under_another_name_are_neither_parsed_nor_solved_again(
     assert snapshot(audit) == snapshot(pipeline.run(elsewhere, cache=False))
 
 
+@pytest.mark.parametrize("how", ["renamed", "copied"])
+def test_a_record_under_the_name_of_another_content_is_no_record(
+    small_db, tmp_path, cache_root, how
+):
+    # The records of two files, one put in the other's place: what is read for a
+    # content must be what was made of that content, or nothing.
+    pipeline.run(small_db, cache=True)
+    first, second = sorted(contents(small_db))[:2]
+    mine, other = record_of(cache_root, first), record_of(cache_root, second)
+    if how == "renamed":
+        os.replace(mine, other)
+    else:
+        shutil.copy(mine, other)
+    expected = scan_output([small_db], "csv", tmp_path / "fresh")
+    assert scan_output([small_db], "csv", cache_root) == expected
+
+
 def test_one_file_named_by_its_directory_and_by_its_path_shows_each_name(write_xml, cache_root):
     path = write_xml(lens_xml(POLY3.format(k1="-0.1")), "a.xml")
     by_directory = scan_output([path.parent], "csv", cache_root)

@@ -11,9 +11,11 @@ Where: ``$LENSAUDIT_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/lensaudit``
 (if that is an absolute path, as the XDG specification requires), else
 ``~/.cache/lensaudit``; records are the files of its ``files`` directory.
 
-Integrity: a record file starts with a fixed header and the fingerprint of
+Integrity: a record file starts with a fixed header, the fingerprint of
 the code that made it (lensaudit's version and a digest of the reader's,
-the normalizer's, the solver's and the metrics' sources), then a
+the normalizer's, the solver's and the metrics' sources) and the digest of
+the content it is for (a record renamed or copied to another name is no
+record), then a
 :mod:`marshal` table of sections, each sealed with a BLAKE2b digest of its
 bytes that is checked before they are unmarshalled. A damaged, truncated or
 foreign record reads as no record; marshal data cannot run code. Records
@@ -48,7 +50,7 @@ except ImportError:  # pragma: no cover - every CPython has _blake2
 #: Records kept at most, and their total size at most (least recently used go first).
 MAX_RECORDS = 20_000
 MAX_BYTES = 1 << 30
-_MAGIC = b"lensaudit record 3\n"
+_MAGIC = b"lensaudit record 4\n"
 _DIGEST_SIZE = 16
 _SUFFIX = ".rec"
 _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
@@ -129,10 +131,10 @@ class Cache:
         path = self._path(digest)
         try:
             data = read_file(path)  # never blocks, even on a FIFO put in its place
-            head = len(_MAGIC) + _DIGEST_SIZE
-            if data[: len(_MAGIC)] != _MAGIC or data[len(_MAGIC) : head] != fingerprint():
+            head = _MAGIC + fingerprint() + digest  # a record renamed or copied is no record
+            if data[: len(head)] != head:
                 return {}
-            sections = marshal.loads(memoryview(data)[head:])
+            sections = marshal.loads(memoryview(data)[len(head) :])
             if not isinstance(sections, dict) or not all(
                 isinstance(k, str) and isinstance(v, tuple) and len(v) == 2
                 for k, v in sections.items()
@@ -187,7 +189,7 @@ class Cache:
 
     def _write(self, digest: bytes) -> None:
         path = self._path(digest)
-        body = _MAGIC + fingerprint() + marshal.dumps(self._records[digest])
+        body = _MAGIC + fingerprint() + digest + marshal.dumps(self._records[digest])
         temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
         try:
             with open(temporary, "xb") as stream:
