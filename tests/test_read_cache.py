@@ -382,9 +382,14 @@ def test_a_file_changed_to_one_that_never_folds_is_audited_again(write_xml):
 # --- a damaged or foreign record is ignored and rebuilt, without a word --------------------
 
 
+#: The size of a fingerprint and of a content's digest.
+DIGEST_SIZE = 16
+
+
 def head_and_sections(data: bytes) -> tuple[bytes, dict[str, tuple[bytes, bytes]]]:
-    """A record as documented: the header with the fingerprint, then the sections."""
-    end = data.index(fingerprint()) + len(fingerprint())
+    """A record as documented: the header with the fingerprint and the digest of
+    the content, then the sections."""
+    end = data.index(fingerprint()) + len(fingerprint()) + DIGEST_SIZE
     return data[:end], marshal.loads(data[end:])
 
 
@@ -451,7 +456,8 @@ def test_a_flipped_byte_in_a_section_is_not_served(small_db, primed, uncached, s
 def test_a_record_of_another_fingerprint_is_not_served(small_db, primed, uncached):
     path, data = primed
     head, _ = head_and_sections(data)
-    other = head[: -len(fingerprint())] + bytes(b ^ 0xFF for b in fingerprint())
+    start = head.index(fingerprint())
+    other = head[:start] + bytes(b ^ 0xFF for b in fingerprint()) + head[start + DIGEST_SIZE :]
     path.write_bytes(forged(data, head=other))
     assert_ignored_and_rebuilt(small_db, path, data, uncached)
 
