@@ -77,3 +77,44 @@ def test_the_cubics_of_every_bundled_zoom_are_those_of_interval_terms() -> None:
     sets = [s for s in zooms.calibration_sets(audit) if len(set(s.focals)) > 1]
     assert len(sets) > 500
     _assert_same(sets, [zooms.coefficient_table(s, audit.entries) for s in sets])
+
+
+@given(
+    st.lists(
+        st.floats(min_value=0.5, max_value=1e6, allow_nan=False),
+        min_size=2,
+        max_size=8,
+        unique=True,
+    )
+)
+def test_the_sweep_takes_every_calibrated_focal_and_at_most_its_bound_between(focals):
+    at = zooms.focal_samples(focals)
+    low, high = min(focals), max(focals)
+    assert at[0] == low and at[-1] == high and set(focals) <= set(at.tolist())
+    assert len(at) <= zooms.MAX_SWEEP_SAMPLES + len(focals)
+    steps = np.diff(at)
+    # Every SWEEP_STEP mm where the range allows it, evenly spread beyond.
+    assert steps.max() <= max(zooms.SWEEP_STEP, (high - low) / (zooms.MAX_SWEEP_SAMPLES - 1)) * (
+        1 + 1e-9
+    )
+
+
+def test_fix_of_a_zoom_with_a_focal_length_mistyped_huge_ends(tmp_path):
+    import subprocess
+    import sys
+
+    (tmp_path / "db.xml").write_text(
+        '<lensdatabase version="2"><lens><maker>T</maker><model>Test 11-16</model>'
+        "<mount>M</mount><cropfactor>1</cropfactor><calibration>"
+        '<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>'
+        '<distortion model="ptlens" focal="12" a="0.000" b="-0.042" c="0.041"/>'
+        '<distortion model="ptlens" focal="110000" a="0.000" b="-0.042" c="0.041"/>'
+        "</calibration></lens></lensdatabase>"
+    )
+    process = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "fix", "--no-cache", "-f", "csv", str(tmp_path)],
+        capture_output=True,
+        timeout=120,  # ten million focal lengths swept before: hours
+    )
+    assert process.returncode == 0, process.stderr
+    assert b",T,Test 11-16,11.0,1.0,ptlens," in process.stdout

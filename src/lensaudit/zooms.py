@@ -37,8 +37,12 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from .pipeline import Audit
 
-#: Focal lengths are swept every this many millimetres (and at each calibration).
+#: Focal lengths are swept every this many millimetres (and at each calibration)...
 SWEEP_STEP = 0.01
+#: ... or, over a range longer than that many steps (400 mm, longer than any zoom's),
+#: at this many focal lengths evenly spread: a focal length mistyped 100,000 would
+#: otherwise make ten million of them.
+MAX_SWEEP_SAMPLES = 40_001
 _INTERVAL_POINTS = 24  # focal lengths imposed in each interval of the linear program
 _ROUNDS = 6  # rounds of adding the focal lengths the sweep finds folding
 _EACH = 1e-2  # weight of each calibration's own largest change, beside the largest of all
@@ -102,11 +106,14 @@ def coefficient_table(
 
 
 def focal_samples(focals: Sequence[float], step: float = SWEEP_STEP) -> np.ndarray:
-    """Focal lengths from the first calibrated to the last, every ``step`` mm,
-    and every calibrated one."""
+    """Focal lengths from the first calibrated to the last, every ``step`` mm
+    (at most :data:`MAX_SWEEP_SAMPLES` of them, evenly spread), and every
+    calibrated one."""
     low, high = min(focals), max(focals)
+    step = max(step, (high - low) / (MAX_SWEEP_SAMPLES - 1))
     count = int(math.floor((high - low) / step + 1e-9))
-    return np.unique(np.concatenate([low + step * np.arange(count + 1), np.asarray(focals)]))
+    between = np.minimum(low + step * np.arange(count + 1), high)  # rounding: never beyond
+    return np.unique(np.concatenate([between, np.asarray(focals)]))
 
 
 def interpolated_rows(
@@ -156,7 +163,8 @@ def sweep(
 ) -> tuple[float, float]:
     """(smallest r_normalized, the focal length where) of the models liblensfun
     interpolates from ``coefficients`` (one per calibration), every
-    :data:`SWEEP_STEP` mm over the calibrated range; (inf, nan) where none folds."""
+    :data:`SWEEP_STEP` mm over the calibrated range (see :func:`focal_samples`);
+    (inf, nan) where none folds."""
     at = focal_samples(calibrations.focals)
     rows = interpolated_rows(coefficients, calibrations.focals, at)
     values = r_normalized_at(
