@@ -579,6 +579,30 @@ def test_an_unusable_cache_directory_is_a_warning_not_an_error(repo, tmp_path):
     assert result.revisions and result.warnings and "not used" in result.warnings[0]
 
 
+def test_a_file_of_someone_else_named_as_the_index_is_kept(repo, tmp_path):
+    (tmp_path / "history").write_text("my notes\n")
+    result = audit_history(repo.path, cache=tmp_path)
+    assert (tmp_path / "history").read_text() == "my notes\n"
+    assert len(result.warnings) == 1 and "not used" in result.warnings[0]
+    assert csv_text(result) == csv_text(audit_history(repo.path))
+
+
+@pytest.mark.parametrize("entry", ["run", "versions"])
+def test_a_fifo_in_place_of_an_index_entry_is_no_entry(repo, tmp_path, entry):
+    audit_history(repo.path, cache=tmp_path)
+    (tmp_path / "history" / entry).unlink()
+    os.mkfifo(tmp_path / "history" / entry)
+    process = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "history", str(repo.path), "-q"]
+        + ["-o", str(tmp_path / "out"), "--cache-dir", str(tmp_path)],
+        capture_output=True,
+        timeout=120,  # a FIFO opened to be read blocks until someone writes to it
+    )
+    assert process.returncode == 0 and process.stderr == b"", process.stderr
+    expected = csv_text(audit_history(repo.path))[0]
+    assert (tmp_path / "out" / "history.csv").read_text(encoding="utf-8") == expected
+
+
 @pytest.fixture(scope="module")
 def uncached_csv(repo: Repository) -> tuple[str, str]:
     return csv_text(audit_history(repo.path))

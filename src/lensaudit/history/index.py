@@ -17,8 +17,9 @@ entry is read or written without the others (the summaries are most of it).
 A file starts with a fixed header and the fingerprint of the code that
 wrote it (:func:`fingerprint`), then the BLAKE2b digest of its body, a
 :mod:`marshal` pair ``(key, value)``; a damaged, truncated or foreign file
-reads as no entry. It is written whole to a temporary file and renamed. A
-file that cannot be written gives a warning, never an error.
+reads as no entry, and one that is not a regular file is not opened (a FIFO
+would block). It is written whole to a temporary file and renamed. An index
+that cannot be written gives one warning, never an error.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from dataclasses import fields
 from pathlib import Path
 
 from .. import read
+from ..read.paths import read_descriptor, read_file
 from ..read.records import DistortionEntry
 from .audit import BlobAudit, Interner
 from .commits import Commit
@@ -43,6 +45,7 @@ except ImportError:  # pragma: no cover - every CPython has _blake2
 #: The index's file name, in the cache directory.
 NAME = "history"
 _MAGIC = b"lensaudit history index 2\n"
+_EARLIER_MAGIC = b"lensaudit history index 1\n"
 _DIGEST_SIZE = 16
 #: The code that decides what a run gives, besides the reader's (which the
 #: one cache's fingerprint covers).
@@ -99,7 +102,7 @@ class Index:
     def get(self, name: str, key: str) -> object | None:
         """The value kept under ``name`` if it was kept for ``key``; else None."""
         try:
-            data = (self.path / name).read_bytes()
+            data = read_file(self.path / name)  # never blocks on a FIFO put in its place
             head = len(_MAGIC) + 2 * _DIGEST_SIZE
             body = memoryview(data)[head + _DIGEST_SIZE :]
             if (
@@ -123,7 +126,7 @@ class Index:
         try:
             body = marshal.dumps((key, value))
             seal = blake2b(body, digest_size=_DIGEST_SIZE).digest()
-            if self.path.is_file():  # the index of an earlier layout: one file
+            if self.path.is_file() and _earlier_layout(self.path):
                 self.path.unlink()
             self.path.mkdir(parents=True, exist_ok=True)
             with open(temporary, "wb") as stream:
@@ -137,7 +140,18 @@ class Index:
                 temporary.unlink(missing_ok=True)
             except OSError:
                 pass
-            self.warnings.append(f"cache {self.path} not used: {error}")
+            if not self.warnings:  # one line says it
+                self.warnings.append(f"cache {self.path} not used: {error}")
+
+
+def _earlier_layout(path: Path) -> bool:
+    """Whether the file at ``path`` is the history's index of the earlier layout
+    (one file): only that is removed in its place, no file of anyone else."""
+    try:
+        with open(read_descriptor(path), "rb") as stream:
+            return stream.read(len(_EARLIER_MAGIC)) == _EARLIER_MAGIC
+    except OSError:
+        return False
 
 
 #: The key of the file versions' summaries (the index's fingerprint covers their shape).
