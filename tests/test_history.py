@@ -579,6 +579,21 @@ def test_an_unusable_cache_directory_is_a_warning_not_an_error(repo, tmp_path):
     assert result.revisions and result.warnings and "not used" in result.warnings[0]
 
 
+@pytest.mark.parametrize("first", ["full", "shallow"])
+def test_a_shallow_clone_and_the_full_repository_at_one_commit_keep_their_own_runs(
+    repo, tmp_path, first
+):
+    shallow = tmp_path / "shallow"
+    subprocess.run(
+        ["git", "clone", "-q", "--depth", "2", f"file://{repo.path}", str(shallow)], check=True
+    )
+    paths = {"full": repo.path, "shallow": shallow}
+    expected = {name: csv_text(audit_history(path)) for name, path in paths.items()}
+    assert expected["full"] != expected["shallow"]  # the clone holds two commits only
+    for name in (first, *(set(paths) - {first})):
+        assert csv_text(audit_history(paths[name], cache=tmp_path / "cache")) == expected[name]
+
+
 def test_a_file_of_someone_else_named_as_the_index_is_kept(repo, tmp_path):
     (tmp_path / "history").write_text("my notes\n")
     result = audit_history(repo.path, cache=tmp_path)

@@ -123,8 +123,10 @@ def audit_history(
     filters = commits.selection(since, until)
     store, index = caches(cache)
     warnings = index.warnings if index is not None else []
-    # A commit names its whole history: the same selection of it gives the same audit.
-    run_key = repr((tip, db_path, filters, first_parent, time.tzname, time.timezone))
+    # A commit names its whole history, as far as the repository holds it (a
+    # shallow clone, grafts): the same selection of it gives the same audit.
+    boundary = git.boundary()
+    run_key = repr((tip, boundary, db_path, filters, first_parent, time.tzname, time.timezone))
     found = _last_run(index, run_key)
     if found is not None:
         again = {"repository": Path(repository), "revision": revision, "warnings": warnings}

@@ -16,6 +16,7 @@ from datetime import datetime
 from pathlib import Path, PurePosixPath
 
 from .. import git as gitlayer
+from ..read.paths import read_file
 
 
 class HistoryError(Exception):
@@ -52,9 +53,23 @@ class Git:
             problem = "not a directory" if self.repository.exists() else "no such directory"
             raise HistoryError(f"{repository}: {problem}")
         try:
-            self.run("rev-parse", "--git-dir")
+            found = self.run("rev-parse", "--git-path", "shallow", "--git-path", "info/grafts")
         except HistoryError:
             raise HistoryError(f"{repository}: not a git repository") from None
+        #: The files that cut a history short (a shallow clone) or graft one on.
+        self._boundary_files = [self.repository / line for line in found.splitlines()]
+
+    def boundary(self) -> str:
+        """What makes the history of a commit other than its ancestors as stored:
+        the commits a shallow clone stops at, grafts and replacements."""
+        texts = []
+        for path in self._boundary_files:
+            try:
+                texts.append(read_file(path).decode("utf-8", "replace"))
+            except OSError:  # none: the usual case
+                texts.append("")
+        texts.append(self.run("for-each-ref", "--format=%(refname) %(objectname)", "refs/replace/"))
+        return "\0".join(texts)
 
     def run(self, *args: str) -> str:
         """Standard output of ``git ARGS``; HistoryError with git's message on failure."""
