@@ -594,6 +594,25 @@ def test_a_shallow_clone_and_the_full_repository_at_one_commit_keep_their_own_ru
         assert csv_text(audit_history(paths[name], cache=tmp_path / "cache")) == expected[name]
 
 
+def test_a_file_name_that_is_not_utf8_is_written_with_backslash_escapes(tmp_path):
+    name = os.fsdecode(b"caf\xe9\xff.xml")
+    repository = git_repository(tmp_path / "repo", {f"data/db/{name}": FOLDING_LENS})
+    written = {}
+    for label, path in (("directory", []), ("file", ["--path", f"data/db/{name}"])):
+        out = tmp_path / label
+        process = subprocess.run(
+            [sys.executable, "-m", "lensaudit", "history", str(repository), "-o", str(out)]
+            + ["-q", "--no-cache", *path],
+            capture_output=True,
+            timeout=120,
+        )
+        assert process.returncode == 0 and process.stderr == b"", process.stderr
+        written[label] = (out / "introduced.csv").read_text(encoding="utf-8")
+    rows = list(csv.DictReader(io.StringIO(written["directory"])))
+    assert [row["file"] for row in rows] == ["caf\\xe9\\xff.xml"]
+    assert written["file"] == written["directory"]
+
+
 def test_a_file_of_someone_else_named_as_the_index_is_kept(repo, tmp_path):
     (tmp_path / "history").write_text("my notes\n")
     result = audit_history(repo.path, cache=tmp_path)

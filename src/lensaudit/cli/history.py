@@ -14,7 +14,7 @@ from ..history import Commit, HistoryError, Revision, audit_history, trend_figur
 from ..history.commits import normalized_path
 from ..history.index import caches, key_of
 from ..read import parallel
-from ..read.paths import enclosing_database
+from ..read.paths import display_path, enclosing_database
 from ..writing import OutputSet
 from .options import cache_option, fail
 
@@ -203,8 +203,9 @@ def _write_outputs(
 def _title(repository: Path, db_path: str, first_parent: bool, newest: Commit) -> str:
     """The trend figure's title."""
     mode = "first-parent line" if first_parent else "all commits"
-    path = normalized_path(db_path)
-    return f"{path} of {repository.resolve().name} ({mode}) up to {newest.date[:10]}"
+    path = display_path(normalized_path(db_path))
+    name = display_path(repository.resolve().name)
+    return f"{path} of {name} ({mode}) up to {newest.date[:10]}"
 
 
 _FIGURES = ("trend.png", "trend.svg")

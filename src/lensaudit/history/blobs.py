@@ -8,6 +8,7 @@ import functools
 import re
 from pathlib import PurePosixPath
 
+from ..read.paths import display_path
 from .commits import Git
 
 
@@ -33,7 +34,8 @@ def _tree_files(data: bytes, oid_size: int, known: dict[bytes, tuple]) -> dict[s
             mode, _, rest = entry.partition(b" ")
             name = rest[: -oid_size - 1]
             file = known[entry] = (
-                (name.decode("utf-8", "surrogateescape"), entry[-oid_size:].hex())
+                # A name that is not UTF-8 as lensaudit shows one, with backslash escapes.
+                (name.decode("utf-8", "backslashreplace"), entry[-oid_size:].hex())
                 if mode.startswith(b"100") and name.lower().endswith(b".xml")
                 else ()
             )
@@ -63,7 +65,7 @@ def file_maps(
                 by_tree[oid] = _tree_files(data, oid_size, entries)
             maps[commit] = by_tree[oid]
         elif kind == "blob":
-            maps[commit] = {PurePosixPath(db_path).name: oid}
+            maps[commit] = {display_path(PurePosixPath(db_path).name): oid}
         else:
             maps[commit] = {}
     return maps, present
