@@ -1241,3 +1241,29 @@ def test_the_nikkor_z_14_30_folds_from_32aa19d_until_17b336c_fixes_it(lensfun_hi
         if e.identity[1] == "NIKKOR Z 14-30mm f/4 S" and e.identity[4] == 24.0
     ]
     assert nikkor[:2] == [("32aa19d", "folds", ""), ("79dca3c", "no-longer-folds", "17b336c")]
+
+
+def test_the_events_of_one_commit_come_in_the_order_of_what_their_entries_are():
+    # Identities are numbered in the order they are met, which an index kept from
+    # other runs decides: the events of a commit must not follow those numbers.
+    from lensaudit.history.audit import BlobAudit
+    from lensaudit.history.commits import Commit
+    from lensaudit.history.events import fold_events
+
+    kinds = [
+        ("Tokina", "Tokina 11-16", 1.0, "ptlens", 11.0, (-0.024, -0.002, 0.005)),
+        ("Huawei", "P30 Pro", 4.86, "ptlens", 2.3, (-0.067, 0.084, 0.015)),
+        ("Olympus", "M.Zuiko 14-42", 2.0, "poly3", 14.0, (-0.079,)),
+    ]
+    first = Commit("a" * 40, (), "2020-01-01T00:00:00+00:00", "", "A", "one")
+    second = Commit("b" * 40, ("a" * 40,), "2020-01-02T00:00:00+00:00", "", "A", "two")
+    found = []
+    for numbering in (kinds, kinds[::-1], kinds[1:] + kinds[:1]):
+        audits = {
+            "empty": BlobAudit("", (), ()),
+            "full": BlobAudit("", (), (0, 1, 2), (0, 1, 2)),
+        }
+        files = {first.hash: {"a.xml": "empty"}, second.hash: {"a.xml": "full"}}
+        events = fold_events([first, second], files, audits, numbering)
+        found.append([event.identity[0] for event in events])
+    assert found == [["Huawei", "Olympus", "Tokina"]] * 3

@@ -40,20 +40,36 @@ def fold_events(
             return None
         return {i for blob in found.values() for i in audits[blob].folding}
 
+    def ordered(numbers: set[int]) -> list[tuple]:
+        # By what the entries are, not by their numbers: those depend on the
+        # order identities were met in, which an index kept from other runs sets.
+        return sorted((identities[i] for i in numbers), key=_identity_order)
+
     events: list[FoldEvent] = []
     before: set[int] | None = set() if line and not line[0].parents else None
     for commit in line:
         now = folding(commit) or set()
         if before is not None:
-            made = [FoldEvent(commit, FOLDS, identities[i]) for i in sorted(now - before)]
+            made = [FoldEvent(commit, FOLDS, identity) for identity in ordered(now - before)]
             made += [
-                FoldEvent(commit, NO_LONGER_FOLDS, identities[i]) for i in sorted(before - now)
+                FoldEvent(commit, NO_LONGER_FOLDS, identity) for identity in ordered(before - now)
             ]
             if made and len(commit.parents) > 1 and branch is not None:
                 made = _on_branch(made, branch(commit), folding, identities)
             events += made
         before = now
     return events
+
+
+def _identity_order(identity: tuple) -> tuple:
+    """A sort key of an entry's identity (maker, lens, crop factor, model, focal
+    length, coefficients): by maker, lens, model, then the numbers (NaN last)."""
+    maker, lens, crop, model, focal, coefficients = identity
+    return (maker, lens, model, _number_order(crop), _number_order(focal), repr(coefficients))
+
+
+def _number_order(value: float) -> tuple[bool, float]:
+    return (True, 0.0) if value != value else (False, value)
 
 
 def _on_branch(
