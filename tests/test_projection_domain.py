@@ -236,3 +236,37 @@ def test_a_lensfun_entry_near_the_float_limit_writes_no_warning(write_xml, tmp_p
     assert completed.stderr.splitlines() == [
         f"lensaudit project: Test 10mm at 10 mm, from {path}:{line}"
     ]
+
+
+@pytest.mark.parametrize(
+    ("crop", "distortion", "expected"),
+    [
+        ("1e308", 'focal="11"', "crop factor 1e+308"),
+        ("1", 'focal="11" real-focal="1e308"', "beyond what floats hold"),
+        ("1", 'focal="1e308"', "beyond what floats hold"),
+    ],
+)
+@pytest.mark.parametrize("info", [False, True])
+def test_a_camera_beyond_the_floats_is_one_line_naming_the_entry(
+    write_xml, tmp_path, crop, distortion, expected, info
+):
+    distortion = f'<distortion model="ptlens" {distortion} a="-0.024" b="-0.002" c="0.005"/>'
+    path = write_xml(lens_xml(distortion, cropfactor=crop))
+    line = next(
+        number
+        for number, content in enumerate(path.read_text().splitlines(), start=1)
+        if "<distortion" in content
+    )
+    points = tmp_path / "points.csv"
+    points.write_text("0.1,0.2,1\n")
+    shown = ["--info"] if info else [str(points)]
+    completed = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "project", *shown]
+        + ["--entry", f"{path}:{line}", "--size", "6000x4000"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert completed.returncode == 2, completed.stderr
+    (message,) = completed.stderr.splitlines()
+    assert message.startswith(f"lensaudit: error: {path}:{line}: ") and expected in message

@@ -172,7 +172,8 @@ class LensfunCalibration:
     @property
     def hugin_per_pinhole(self) -> float:
         """Hugin units of the calibration sensor per pinhole unit: f_g / h."""
-        return self.geometry_focal / self.half_short_side_mm
+        half_short_side = self.half_short_side_mm
+        return self.geometry_focal / half_short_side if half_short_side > 0 else math.inf
 
     @property
     def r_max_hugin(self) -> float:
@@ -309,6 +310,11 @@ def lensfun_camera(
     camera_crop = calibration.crop_factor if crop_factor is None else float(crop_factor)
     if not (math.isfinite(camera_crop) and camera_crop > 0):
         raise ProjectionError(f"crop factor {camera_crop:g} is not positive")
+    if not calibration.half_short_side_mm > 0:
+        raise ProjectionError(
+            f"crop factor {calibration.crop_factor:g} with aspect ratio "
+            f"{calibration.aspect_ratio:g}: a sensor too small for floats"
+        )
     hugin_per_pinhole = calibration.hugin_per_pinhole
     if not (math.isfinite(hugin_per_pinhole) and hugin_per_pinhole > 0):
         raise ProjectionError(
@@ -333,6 +339,11 @@ def lensfun_camera(
         pairs = zip(polynomial, scales, strict=True)
         distortion = tuple(float(value * scale) if value else 0.0 for value, scale in pairs)
     focal_pixels = pixels_per_hugin * hugin_per_pinhole
+    if not (math.isfinite(focal_pixels) and focal_pixels > 0):
+        raise ProjectionError(
+            f"focal length {calibration.geometry_focal:g} mm (real focal / d) on this image is "
+            f"{focal_pixels:g} px: beyond what floats hold"
+        )
     notes = ()
     if calibration.type not in PINHOLE_TYPES:
         notes = (f"{calibration.type} lens: project() needs a rectilinear one",)

@@ -121,25 +121,30 @@ def project(
         )
     given = [points] if points is not None and str(points) != "-" else []
     refuse_writing_inputs([output], None if opencv else databases, *given)
+    chosen = ""
     try:
         if opencv:
             camera = _opencv_camera(opencv, size)
         else:
             width, height = _size(size)
-            camera = _lensfun_camera(entry, lens, focal, databases, width, height, crop, real_focal)
+            camera, chosen = _lensfun_camera(
+                entry, lens, focal, databases, width, height, crop, real_focal
+            )
     except ProjectionError as error:
         fail(str(error))
     if info:
         with output_stream(output) as stream:
             _write_info(camera, stream)
-        return
-    array = _read_points(points)
-    try:
-        pixels, valid = camera.project(array)
-    except ProjectionError as error:
-        fail(str(error))
-    with output_stream(output) as stream:
-        _write_pixels(pixels, valid, stream)
+    else:
+        array = _read_points(points)
+        try:
+            pixels, valid = camera.project(array)
+        except ProjectionError as error:
+            fail(str(error))
+        with output_stream(output) as stream:
+            _write_pixels(pixels, valid, stream)
+    if chosen:
+        click.echo(chosen, err=True)
 
 
 def _check_choice(
@@ -228,8 +233,9 @@ def _lensfun_camera(
     height: int,
     crop: float | None,
     real_focal: float | None,
-) -> RadialCamera:
-    from ..projection import lensfun_camera  # numpy: --help stays quick
+) -> tuple[RadialCamera, str]:
+    """The camera of the entry chosen, and a line saying which entry it is."""
+    from ..projection import ProjectionError, lensfun_camera  # numpy: --help stays quick
 
     if entry:
         found = _entry_at(entry)
@@ -237,8 +243,14 @@ def _lensfun_camera(
         if focal is None:
             fail("--lens needs --focal MM (a focal length the lens is calibrated at)")
         found = _entry_by_name(lens or "", focal, crop, databases)
-    # Without --real-focal, the entry's own (its attribute, else <real-focal-length>).
-    return lensfun_camera(found, width, height, crop, real_focal=real_focal)
+    where = f"{found.file}:{found.line}"
+    try:
+        # Without --real-focal, the entry's own (its attribute, else <real-focal-length>).
+        camera = lensfun_camera(found, width, height, crop, real_focal=real_focal)
+    except ProjectionError as error:
+        fail(f"{where}: {error}")
+    # Said once the points are projected: a problem is then the one line on stderr.
+    return camera, f"lensaudit project: {found.lens} at {found.focal:g} mm, from {where}"
 
 
 def _entry_at(text: str) -> DistortionEntry:
@@ -272,7 +284,6 @@ def _entry_at(text: str) -> DistortionEntry:
     found = matches[0]
     if found.status != STATUS_OK:
         fail(f"{where}: entry cannot be used ({found.status}: {found.message})")
-    click.echo(f"lensaudit project: {found.lens} at {found.focal:g} mm, from {where}", err=True)
     return found
 
 
@@ -312,7 +323,6 @@ def _entry_by_name(
             "choose one with --entry FILE:LINE"
         )
     found = at_focal[0]
-    click.echo(f"lensaudit project: {found.lens} at {found.focal:g} mm, from {label}", err=True)
     return found
 
 
