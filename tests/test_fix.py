@@ -703,3 +703,17 @@ def test_a_lens_filter_that_matches_nothing_is_refused(bundled_db):
     assert "no audited entry" in none.output and "Nikkor 999mm" in none.output
     unfolding = CliRunner().invoke(main, ["fix", "--no-cache", "--lens", "Nikkor", "--focal", "50"])
     assert unfolding.exit_code == 0 and "0 entries" in unfolding.output
+
+
+def test_progress_is_told_once_per_entry_refitted(tmp_path):
+    lines = [
+        f'<distortion model="ptlens" focal="{focal}" a="-0.024" b="-0.002" c="0.005"/>'
+        for focal in (11, 12, 13)
+    ]
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "one.xml").write_text(lens_xml(*lines))
+    audit = run(tmp_path / "db")
+    indices = fix.select(audit)
+    told = []
+    results = fix.fix_audit(audit, indices, progress=lambda done, total: told.append((done, total)))
+    assert len(results) == 3 and told == [(1, 3), (2, 3), (3, 3)]

@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -470,6 +470,7 @@ def fix_audit(
     target: float | None = None,
     tolerance: float = DEFAULT_TOLERANCE_PX,
     sources: SourceTexts | None = None,
+    progress: Callable[[int, int], object] | None = None,
 ) -> list[FixResult]:
     """:func:`fix_entry` for the given entries of an audit (see :func:`select`),
     then each lens's calibrations judged together as liblensfun interpolates
@@ -478,9 +479,10 @@ def fix_audit(
     With ``sources`` (:func:`read_sources`), the number format of each entry
     is taken from its file, and an entry whose element was not found there
     gets status ``not_located`` (its refit is still computed and shown).
+    ``progress(done, total)`` is called as each entry is refitted.
     """
     results = []
-    for index in indices:
+    for done, index in enumerate(indices, start=1):
         texts = sources.texts(index) if sources is not None else None
         result = fix_entry(
             audit.entries[index],
@@ -491,6 +493,8 @@ def fix_audit(
             image_radius=float(audit.metrics.r_corner[index]),
         )
         results.append(_located(replace(result, index=index), sources))
+        if progress is not None:
+            progress(done, len(indices))
     return fix_zooms(audit, results, sources, margin=margin, target=target, tolerance=tolerance)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -20,6 +21,7 @@ from ..writing import WriteError
 from ..xmlpatch import PatchError, unified_diff
 from ..xmlpatch import write as write_patches
 from .options import (
+    ProgressBar,
     cache_option,
     database_paths,
     fail,
@@ -197,14 +199,24 @@ def _refit(
             f"no audited entry of {audit.source.label} matches {' and '.join(filter(None, wanted))}"
         )
     indices = stage.select(audit, margin=margin, lens=lens, focal=focal)
+    # A few entries take a second; a file of thousands that fold, minutes.
+    bar = ProgressBar("Refitting entries", enabled=sys.stderr.isatty())
     try:
         sources = stage.read_sources(audit, indices)
         results = stage.fix_audit(
-            audit, indices, margin=margin, target=target, tolerance=tolerance, sources=sources
+            audit,
+            indices,
+            margin=margin,
+            target=target,
+            tolerance=tolerance,
+            sources=sources,
+            progress=bar.update,
         )
         patches = [p for p in stage.patches(results, sources) if p.changed]
     except PatchError as error:
         fail(str(error))
+    finally:
+        bar.close()
     return results, patches
 
 

@@ -16,7 +16,7 @@ from ..history.index import caches, key_of
 from ..read import parallel
 from ..read.paths import display_path, enclosing_database
 from ..writing import OutputSet
-from .options import cache_option, fail
+from .options import ProgressBar, cache_option, fail
 
 
 @click.command()
@@ -102,7 +102,7 @@ def history(
     except OSError as error:
         fail(f"cannot create {output_dir}: {error.strerror or error}")
     # --cache-dir has named the directory by now, as $LENSAUDIT_CACHE_DIR does.
-    bar = _ProgressBar(enabled=not quiet and sys.stderr.isatty())
+    bar = ProgressBar("Auditing file versions", enabled=not quiet and sys.stderr.isatty())
     # What the history allocates (the summary of every file version) lives until
     # it ends. The trend figures are drawn by a process that imports matplotlib
     # meanwhile (forked now: the commits and the newest files are read beside it).
@@ -146,29 +146,6 @@ def _checkout() -> Path:
             "(the database bundled with lensfunpy has no history): give REPO"
         )
     return found.parents[1]
-
-
-class _ProgressBar:
-    """click's progress bar on standard error, created once the total is known."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.bar = None
-
-    def update(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        if self.bar is None:
-            self.bar = click.progressbar(
-                length=total, label="Auditing file versions", file=sys.stderr, show_pos=True
-            )
-            self.bar.__enter__()
-        self.bar.update(done - self.bar.pos)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(None, None, None)
-            self.bar = None
 
 
 def _write_outputs(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from ..commands import (
 
 __all__ = [
     "EXIT_INPUT_ERROR",
+    "ProgressBar",
     "FORMAT_NAMES",
     "cache_option",
     "database_paths",
@@ -93,3 +95,28 @@ def _use_cache_dir(context: click.Context, parameter: click.Parameter, value: Pa
     """--cache-dir DIR: the cache's directory for this run, as $LENSAUDIT_CACHE_DIR names it."""
     if value is not None:
         use_cache_dir(value)
+
+
+class ProgressBar:
+    """click's progress bar on standard error (when ``enabled``), made once the
+    total is known: :meth:`update` with (done, total), then :meth:`close`."""
+
+    def __init__(self, label: str, enabled: bool) -> None:
+        self.label = label
+        self.enabled = enabled
+        self.bar: Any = None
+
+    def update(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            self.bar = click.progressbar(
+                length=total, label=self.label, file=sys.stderr, show_pos=True
+            )
+            self.bar.__enter__()
+        self.bar.update(done - self.bar.pos)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+            self.bar = None
