@@ -717,3 +717,25 @@ def test_progress_is_told_once_per_entry_refitted(tmp_path):
     told = []
     results = fix.fix_audit(audit, indices, progress=lambda done, total: told.append((done, total)))
     assert len(results) == 3 and told == [(1, 3), (2, 3), (3, 3)]
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32"])
+def test_a_utf16_file_is_refitted_and_said_not_patched_for_its_encoding(runner, tmp_path, encoding):
+    text = lens_xml('<distortion model="ptlens" focal="11" a="-0.024" b="-0.002" c="0.005"/>')
+    declared = '<?xml version="1.0" encoding="UTF-16"?>\n' if encoding != "utf-32" else ""
+    (tmp_path / "db").mkdir()
+    path = tmp_path / "db" / "one.xml"
+    if encoding == "utf-16-be":  # with its byte order mark, as an editor writes it
+        path.write_bytes(b"\xfe\xff" + (declared + text).encode(encoding))
+    else:
+        path.write_bytes((declared + text).encode(encoding))
+    before = path.read_bytes()
+    result = runner.invoke(main, ["fix", str(tmp_path / "db"), "-f", "csv", "--write"])
+    assert path.read_bytes() == before
+    rows = list(csv.DictReader(io.StringIO(result.output)))
+    if not rows:  # a UTF-32 file is not read at all: nothing to refit
+        assert result.exit_code == 2 and "one.xml" in result.output
+        return
+    assert result.exit_code == 0, result.output
+    assert [row["status"] for row in rows] == ["not_located"]
+    assert "UTF-16 or UTF-32" in rows[0]["message"] and rows[0]["a_new"] != ""

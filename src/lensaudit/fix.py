@@ -444,9 +444,18 @@ def read_sources(audit: Audit, indices: Sequence[int]) -> SourceTexts:
         entry = audit.entries[index]
         if entry.file not in sources.files and entry.file not in unreadable:
             try:
-                sources.files[entry.file] = (paths[entry.file], read_file(paths[entry.file]))
+                data = read_file(paths[entry.file])
             except OSError as error:
                 unreadable[entry.file] = f"cannot read the file again: {error.strerror or error}"
+            else:
+                if data[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\0" in data[:4]:
+                    # Patched as bytes, where a tag is ASCII: UTF-16 and UTF-32 are not.
+                    unreadable[entry.file] = (
+                        "the file is UTF-16 or UTF-32 text, which is not patched: "
+                        "save it as UTF-8 and run again"
+                    )
+                else:
+                    sources.files[entry.file] = (paths[entry.file], data)
         if entry.file in unreadable:
             sources.problems[index] = unreadable[entry.file]
             continue
