@@ -16,6 +16,7 @@ import sys
 import warnings
 from decimal import Decimal, localcontext
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -215,22 +216,28 @@ def test_huge_opencv_coefficients_leave_standard_error_empty(tmp_path, opencv, i
     assert completed.stdout
 
 
-def test_a_lensfun_entry_near_the_float_limit_writes_no_warning(write_xml, tmp_path):
-    path = write_xml(lens_xml('<distortion model="poly5" focal="10" k1="1e308" k2="-1.7e308"/>'))
-    line = next(
-        number
-        for number, text in enumerate(path.read_text().splitlines(), start=1)
-        if "<distortion" in text
-    )
-    points = tmp_path / "points.csv"
-    points.write_text("0.001,0,1\n1,1,1\n")
-    completed = subprocess.run(
-        [sys.executable, "-m", "lensaudit", "project", str(points)]
-        + ["--entry", f"{path}:{line}", "--size", "600x400"],
+def distortion_line(path: Path) -> int:
+    """The line of the (first) <distortion> of a file."""
+    lines = enumerate(path.read_text().splitlines(), start=1)
+    return next(number for number, text in lines if "<distortion" in text)
+
+
+def project_command(*words: str) -> subprocess.CompletedProcess:
+    """``lensaudit project WORDS...`` in a fresh process, as a user runs it."""
+    return subprocess.run(
+        [sys.executable, "-m", "lensaudit", "project", *words],
         capture_output=True,
         text=True,
         timeout=120,
     )
+
+
+def test_a_lensfun_entry_near_the_float_limit_writes_no_warning(write_xml, tmp_path):
+    path = write_xml(lens_xml('<distortion model="poly5" focal="10" k1="1e308" k2="-1.7e308"/>'))
+    line = distortion_line(path)
+    points = tmp_path / "points.csv"
+    points.write_text("0.001,0,1\n1,1,1\n")
+    completed = project_command(str(points), "--entry", f"{path}:{line}", "--size", "600x400")
     assert completed.returncode == 0, completed.stderr
     # Standard error holds only the note naming the entry and its database.
     assert completed.stderr.splitlines() == [
@@ -252,21 +259,11 @@ def test_a_camera_beyond_the_floats_is_one_line_naming_the_entry(
 ):
     distortion = f'<distortion model="ptlens" {distortion} a="-0.024" b="-0.002" c="0.005"/>'
     path = write_xml(lens_xml(distortion, cropfactor=crop))
-    line = next(
-        number
-        for number, content in enumerate(path.read_text().splitlines(), start=1)
-        if "<distortion" in content
-    )
+    line = distortion_line(path)
     points = tmp_path / "points.csv"
     points.write_text("0.1,0.2,1\n")
-    shown = ["--info"] if info else [str(points)]
-    completed = subprocess.run(
-        [sys.executable, "-m", "lensaudit", "project", *shown]
-        + ["--entry", f"{path}:{line}", "--size", "6000x4000"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    shown = "--info" if info else str(points)
+    completed = project_command(shown, "--entry", f"{path}:{line}", "--size", "6000x4000")
     assert completed.returncode == 2, completed.stderr
     (message,) = completed.stderr.splitlines()
     assert message.startswith(f"lensaudit: error: {path}:{line}: ") and expected in message
