@@ -238,22 +238,21 @@ def _lensfun_camera(
     from ..projection import ProjectionError, lensfun_camera  # numpy: --help stays quick
 
     if entry:
-        found = _entry_at(entry)
+        found, named = _entry_at(entry)
     else:
         if focal is None:
             fail("--lens needs --focal MM (a focal length the lens is calibrated at)")
-        found = _entry_by_name(lens or "", focal, crop, databases)
-    where = f"{found.file}:{found.line}"
+        found, named = _entry_by_name(lens or "", focal, crop, databases)
     try:
         # Without --real-focal, the entry's own (its attribute, else <real-focal-length>).
         camera = lensfun_camera(found, width, height, crop, real_focal=real_focal)
     except ProjectionError as error:
-        fail(f"{where}: {error}")
+        fail(f"{named if entry else f'{found.file}:{found.line}'}: {error}")
     # Said once the points are projected: a problem is then the one line on stderr.
-    return camera, f"lensaudit project: {found.lens} at {found.focal:g} mm, from {where}"
+    return camera, f"lensaudit project: {found.lens} at {found.focal:g} mm, from {named}"
 
 
-def _entry_at(text: str) -> DistortionEntry:
+def _entry_at(text: str) -> tuple[DistortionEntry, str]:
     """The entry at FILE:LINE; a FILE that does not exist is looked for in the
     default database (the Lensfun checkout around the working directory,
     else the one bundled with lensfunpy)."""
@@ -284,12 +283,12 @@ def _entry_at(text: str) -> DistortionEntry:
     found = matches[0]
     if found.status != STATUS_OK:
         fail(f"{where}: entry cannot be used ({found.status}: {found.message})")
-    return found
+    return found, where
 
 
 def _entry_by_name(
     text: str, focal: float, crop: float | None, databases: tuple[Path, ...]
-) -> DistortionEntry:
+) -> tuple[DistortionEntry, str]:
 
     try:
         database = read.read(list(databases) or None)
@@ -323,7 +322,7 @@ def _entry_by_name(
             "choose one with --entry FILE:LINE"
         )
     found = at_focal[0]
-    return found
+    return found, label
 
 
 #: What a .npy file starts with (NumPy's format documentation).

@@ -123,8 +123,7 @@ def audit_history(
     filters = commits.selection(since, until)
     store, index = caches(cache)
     warnings = index.warnings if index is not None else []
-    # A commit names its whole history, as far as the repository holds it (a
-    # shallow clone, grafts): the same selection of it gives the same audit.
+    # A commit and where its history stops (a shallow clone, grafts) name that history.
     boundary = git.boundary()
     run_key = repr((tip, boundary, db_path, filters, first_parent, time.tzname, time.timezone))
     found = _last_run(index, run_key)
