@@ -107,6 +107,10 @@ def test_text_shows_control_characters_as_escapes():
     hostile = Finding("error", "bad-value", "a.xml", 1, 0, "x\x1b[2Jy\x9b\u2028z\udcff")
     assert "x\\x1b[2Jy\\x9b\\u2028z\\udcff" in render("text", result(hostile))
     assert printable("plain \u00e9") == "plain \u00e9"
+    # Bidirectional marks and overrides would show the text in another order.
+    assert printable("rlo\u202egnp.exe \u2066x\u2069\u200f") == (
+        "rlo\\u202egnp.exe \\u2066x\\u2069\\u200f"
+    )
 
 
 # -- json --------------------------------------------------------------------------

@@ -374,6 +374,19 @@ def test_control_characters_in_a_lens_name_do_not_reach_the_terminal(write_xml):
     assert "\u009b" not in result.output and "A\\x9b2JB" in result.output
 
 
+def test_control_characters_from_a_database_are_escaped_in_the_scan_table(write_xml):
+    # A line end and a CSI in a lens name, a BEL in a file name, an override in a
+    # message: none may move the cursor or make a row of its own.
+    name = "A&#13;FAKE&#10;  0.000  Spoofed\u009b31m\u202eolleh"
+    write_xml(lens_xml(FOLDING).replace("<model>Test 10mm</model>", f"<model>{name}</model>"))
+    write_xml("<lensdatabase><lens>\u202e</lensdatabase>", "bel\a.xml")
+    result = CliRunner().invoke(main, ["scan", str(write_xml(lens_xml(FOLDING), "c.xml").parent)])
+    assert result.exit_code == 0, result.output
+    assert not set(result.output) & {"\r", "\a", "\x1b", "\u009b", "\u202e"}
+    assert "A\\x0dFAKE\\x0a  0.000  Spoofed\\x9b31m\\u202eolleh" in result.output
+    assert "bel\\x07.xml:1: xml_error:" in result.output
+
+
 def test_a_distortion_in_a_file_that_is_not_well_formed_is_counted_not_checked(write_xml):
     xml = lens_xml(FOLDING, '<distortion model="poly3" focal="11" k1="-0.3">')  # not closed
     result = check(write_xml(xml))

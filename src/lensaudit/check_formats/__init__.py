@@ -3,10 +3,11 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from importlib import import_module
 from typing import TYPE_CHECKING, TextIO
+
+from ..formats import printable
 
 if TYPE_CHECKING:
     from ..check import CheckResult
@@ -14,25 +15,10 @@ if TYPE_CHECKING:
 #: Format name -> module under lensaudit.check_formats.
 FORMATS = {"text": "text", "json": "json_format", "github": "github", "junit": "junit"}
 
-# C0 and C1 control characters, DEL, the line and paragraph separators, and
-# lone surrogates (undecodable bytes of a file name): text from a database
-# must not move a terminal's cursor, split a line or fail to encode.
-_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
-
 
 def writer(name: str) -> Callable[[CheckResult, TextIO], None]:
     """The ``write(result, stream)`` function of the named format."""
     return import_module(f"{__name__}.{FORMATS[name]}").write
-
-
-def printable(text: str) -> str:
-    """``text`` with control characters shown as ``\\xNN`` escapes."""
-    return _CONTROL.sub(
-        lambda m: (
-            f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256 else f"\\u{ord(m.group()):04x}"
-        ),
-        text,
-    )
 
 
 def summary_line(result: CheckResult) -> str:

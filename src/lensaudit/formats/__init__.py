@@ -9,6 +9,7 @@ with the literals between them (:func:`interleaved`).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from importlib import import_module
 from itertools import chain
@@ -75,3 +76,22 @@ def metric_fields(
         else:
             fields.append(floats(values))
     return fields
+
+
+# C0 and C1 control characters, DEL, the line and paragraph separators, the
+# marks and overrides of bidirectional text, and lone surrogates (undecodable
+# bytes of a file name): text from a database must not move a terminal's
+# cursor, split a line, show itself in another order or fail to encode.
+_CONTROL = re.compile(
+    "[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028-\u202e\u2066-\u2069\ud800-\udfff]"
+)
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters shown as ``\\xNN`` escapes."""
+    return _CONTROL.sub(
+        lambda m: (
+            f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256 else f"\\u{ord(m.group()):04x}"
+        ),
+        text,
+    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ..version import __version__
+from . import printable
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -47,7 +48,7 @@ def lines(audit: Audit) -> list[str]:
     """The summary as lines of text."""
     summary = audit.summary
     out = [
-        f"lensaudit {__version__}: {audit.source.label}",
+        f"lensaudit {__version__}: {printable(audit.source.label)}",
         f"{summary.files} file{'s' if summary.files != 1 else ''}, "
         f"{summary.entries} distortion entries, {summary.audited} audited",
         "",
@@ -86,12 +87,12 @@ def lines(audit: Audit) -> list[str]:
             rows.append(
                 [
                     f"{r_normalized[i]:.3f}",
-                    entry.maker,
-                    entry.lens,
+                    printable(entry.maker),
+                    printable(entry.lens),
                     _focal(entry.focal),
                     f"{entry.crop_factor:g}",
-                    entry.type,
-                    f"{entry.file}:{entry.line}",
+                    printable(entry.type),
+                    printable(f"{entry.file}:{entry.line}"),
                 ]
             )
         out += text_table(
@@ -111,7 +112,8 @@ def lines(audit: Audit) -> list[str]:
         counts = ", ".join(f"{n} {s}" for s, n in summary.statuses.items() if s != "ok")
         out.append(f"Not audited: {len(problems)} entries ({counts})")
         for entry in map(audit.entry, problems[:PROBLEMS_SHOWN]):
-            out.append(f"  {entry.file}:{entry.line}: {entry.status}: {entry.message}")
+            where = printable(f"{entry.file}:{entry.line}")
+            out.append(f"  {where}: {entry.status}: {printable(entry.message)}")
         if len(problems) > PROBLEMS_SHOWN:
             out.append(
                 f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"
