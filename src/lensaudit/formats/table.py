@@ -106,24 +106,28 @@ def lines(audit: Audit) -> list[str]:
         f"flagged instead; see column r_normalized_paper.)"
     )
 
-    problems = [i for i, status in enumerate(audit.column("status")) if status != "ok"]
-    if problems:
-        out.append("")
-        counts = ", ".join(f"{n} {s}" for s, n in summary.statuses.items() if s != "ok")
-        out.append(f"Not audited: {len(problems)} entries ({counts})")
-        for entry in map(audit.entry, problems[:PROBLEMS_SHOWN]):
-            where = printable(f"{entry.file}:{entry.line}")
-            out.append(f"  {where}: {entry.status}: {printable(entry.message)}")
-        if len(problems) > PROBLEMS_SHOWN:
-            out.append(
-                f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)"
-            )
+    out += _not_audited(audit)
     out.append("")
     out.append(
         "Next: every entry with its numbers, `lensaudit scan --format csv`; "
         + ("refit the folds, `lensaudit fix`; " if folding else "")
         + "a gate for database changes, `lensaudit check`."
     )
+    return out
+
+
+def _not_audited(audit: Audit) -> list[str]:
+    """The lines on the entries that were not audited (none if every one was)."""
+    problems = [i for i, status in enumerate(audit.column("status")) if status != "ok"]
+    if not problems:
+        return []
+    counts = ", ".join(f"{n} {s}" for s, n in audit.summary.statuses.items() if s != "ok")
+    out = ["", f"Not audited: {len(problems)} entries ({counts})"]
+    for entry in map(audit.entry, problems[:PROBLEMS_SHOWN]):
+        where = printable(f"{entry.file}:{entry.line}")
+        out.append(f"  {where}: {entry.status}: {printable(entry.message)}")
+    if len(problems) > PROBLEMS_SHOWN:
+        out.append(f"  ... and {len(problems) - PROBLEMS_SHOWN} more (all of them: --format csv)")
     return out
 
 
