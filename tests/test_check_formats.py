@@ -74,9 +74,27 @@ def test_github_annotation_cannot_be_split_by_hostile_text():
 def test_github_annotates_new_findings_only_and_ends_with_the_verdict():
     text = render("github", result(FOLD, KNOWN, baseline="origin/main"))
     commands = [line for line in text.splitlines() if line.startswith("::")]
-    assert commands == [annotation(FOLD)]
+    assert commands[0] == annotation(FOLD)
     assert "data/db/a.xml:30: error [duplicate-focal] Lens: twice" in text
     assert text.splitlines()[-1].startswith("lensaudit check FAILED: 3 files, 5 distortion")
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["Lens ##[stop-commands]tok ##[error]pwned", "::error file=x.xml,line=1::pwned", "%0A::x::"],
+)
+def test_github_reads_no_command_in_a_known_finding(name):
+    # GitHub reads "::command::" after leading spaces, and "##[command]" anywhere in
+    # a line: the known findings are written with commands stopped around them.
+    known = Finding("error", "fold-in-image", name, 9, 0, f"{name}: folds", known=True)
+    lines = render("github", result(FOLD, known, baseline="HEAD")).splitlines()
+    stop = next(i for i, line in enumerate(lines) if line.startswith("::stop-commands::"))
+    token = lines[stop].removeprefix("::stop-commands::")
+    end = lines.index(f"::{token}::")
+    assert lines[:stop] == [annotation(FOLD)]
+    assert any(name in line for line in lines[stop + 1 : end])
+    assert not any(name in line or token in line for line in lines[end + 1 :])
+    assert len(token) == 32 and all(token not in line for line in lines[stop + 1 : end])
 
 
 # -- text --------------------------------------------------------------------------

@@ -124,7 +124,8 @@ def test_github_annotations_carry_the_path_from_the_repository_root(
         main, ["check", "data/db", "--baseline", repository.baseline, "--format", "github"]
     )
     assert result.exit_code == 1
-    commands = [line for line in result.output.splitlines() if line.startswith("::")]
+    annotations = ("::error ", "::warning ", "::notice ")
+    commands = [line for line in result.output.splitlines() if line.startswith(annotations)]
     assert [line.split("::")[1] for line in commands] == [
         f"error file=data/db/{CHANGED_FILE},line={fold_line},title=lensaudit fold-in-image",
         f"error file=data/db/{CHANGED_FILE},line={malformed_line},title=lensaudit bad-value",

@@ -4,13 +4,16 @@
 likewise) puts the finding on the pull request's line. Following GitHub's
 rules, ``%``, CR and LF are escaped in the message, and also ``:`` and ``,``
 in property values. Known findings are listed as plain log lines, which
-GitHub does not annotate; a summary line ends the output.
+GitHub does not annotate, with workflow commands stopped around them
+(``::stop-commands::TOKEN`` ... ``::TOKEN::``): a lens name there is never
+read as a command. A summary line ends the output.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, TextIO
 
+from ..read.cache import content_hasher
 from . import printable, summary_line
 from .text import finding_line
 
@@ -48,8 +51,12 @@ def write(result: CheckResult, stream: TextIO) -> None:
     out = [annotation(f) for f in result.findings if not f.known]
     known = [f for f in result.findings if f.known]
     if known:
-        out.append(f"Known from baseline {printable(result.baseline or '')} (not failing):")
-        # Indented: a log line that starts with "::" would be read as a command.
-        out += ["  " + finding_line(f) for f in known]
+        lines = [f"Known from baseline {printable(result.baseline or '')} (not failing):"]
+        lines += ["  " + finding_line(f) for f in known]
+        # Text from the database, where GitHub reads a command in a line starting
+        # with "::" after spaces, or holding "##[": commands are stopped around it,
+        # with a token no such text can hold (the digest of the text itself).
+        token = content_hasher("\n".join(lines).encode("utf-8", "surrogatepass")).hexdigest()
+        out += [f"::stop-commands::{token}", *lines, f"::{token}::"]
     out.append(summary_line(result))
     stream.write("\n".join(out) + "\n")
