@@ -30,7 +30,7 @@ def drawn_by_pid(_: histogram.Histogram) -> tuple[bytes, str]:
 
 
 def test_the_forked_process_draws_what_is_drawn_here(forked):
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         figure5.send(HISTOGRAM)
         png, svg = figure5.result()
     assert (png, svg) == drawing.draw(HISTOGRAM)
@@ -40,7 +40,7 @@ def test_the_forked_process_draws_what_is_drawn_here(forked):
 
 def test_the_figure_is_drawn_in_the_forked_process(forked, monkeypatch):
     monkeypatch.setattr(drawing, "draw", drawn_by_pid)
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         figure5.send(HISTOGRAM)
         png, _ = figure5.result()
     assert png != str(os.getpid()).encode()
@@ -56,7 +56,7 @@ def test_what_a_failing_process_had_to_draw_is_drawn_here(forked, monkeypatch):
         return drawn_by_pid(data)
 
     monkeypatch.setattr(drawing, "draw", fails_elsewhere)
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         figure5.send(HISTOGRAM)
         assert figure5.result() == (str(parent).encode(), "svg")
     assert no_child_left()
@@ -64,7 +64,7 @@ def test_what_a_failing_process_had_to_draw_is_drawn_here(forked, monkeypatch):
 
 def test_what_a_killed_process_had_to_draw_is_drawn_here(forked, monkeypatch):
     monkeypatch.setattr(drawing, "draw", drawn_by_pid)
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         assert figure5._pid is not None
         os.kill(figure5._pid, 9)
         figure5.send(HISTOGRAM)
@@ -73,7 +73,7 @@ def test_what_a_killed_process_had_to_draw_is_drawn_here(forked, monkeypatch):
 
 
 def test_a_drawing_not_waited_for_ends_its_process(forked):
-    with pytest.raises(KeyError), drawing.started() as figure5:
+    with pytest.raises(KeyError), drawing.Figure5Drawing() as figure5:
         assert figure5._pid is not None
         figure5.send(HISTOGRAM)
         raise KeyError("the report failed before its figure was wanted")
@@ -83,7 +83,7 @@ def test_a_drawing_not_waited_for_ends_its_process(forked):
 def test_nothing_is_forked_on_one_cpu(monkeypatch):
     monkeypatch.setattr(parallel, "cpus", lambda: 1)
     monkeypatch.setattr(drawing, "draw", drawn_by_pid)
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         assert figure5._pid is None
         figure5.send(HISTOGRAM)
         assert figure5.result() == drawn_by_pid(HISTOGRAM)
@@ -94,7 +94,7 @@ def test_nothing_is_forked_while_another_thread_runs(forked):
     other = threading.Thread(target=release.wait)
     other.start()
     try:
-        with drawing.started() as figure5:
+        with drawing.Figure5Drawing() as figure5:
             assert figure5._pid is None
     finally:
         release.set()
@@ -113,7 +113,7 @@ def test_the_drawing_process_holds_a_cpu_while_it_runs(monkeypatch):
     assert threading.active_count() == 1, "another thread runs: nothing would be forked"
     parent = os.getpid()
     assert parallel.cpus() == 2
-    with drawing.started() as figure5:
+    with drawing.Figure5Drawing() as figure5:
         assert parallel.cpus() == 1
         sizes = [parallel.MIN_BYTES] * 4
         read_meanwhile = parallel.map_sized(lambda n: os.getpid(), list(range(4)), sizes)
@@ -121,7 +121,7 @@ def test_the_drawing_process_holds_a_cpu_while_it_runs(monkeypatch):
         figure5.send(HISTOGRAM)
         assert figure5.result()[0].startswith(b"\x89PNG")
         assert parallel.cpus() == 2  # ended: its CPU is free again
-    with drawing.started():  # a drawing not waited for frees its CPU too
+    with drawing.Figure5Drawing():  # a drawing not waited for frees its CPU too
         assert parallel.cpus() == 1
     assert parallel.cpus() == 2
     assert no_child_left()

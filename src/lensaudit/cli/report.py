@@ -70,7 +70,7 @@ def report(
         except PaperValuesError as error:
             fail(str(error))
     # Figure 5's process (where one is forked) imports matplotlib while this one reads.
-    with cycle_collector_off(), drawing.started() as figure5:
+    with cycle_collector_off(), drawing.Figure5Drawing() as figure5:
         try:
             # Read once, with the calibrations: every table and figure comes from this read.
             audits = audit(list(paths) or None, cache=cache)

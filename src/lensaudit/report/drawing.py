@@ -18,15 +18,12 @@ the database alone, rather than three processes sharing two CPUs.
 from __future__ import annotations
 
 import io
-from contextlib import contextmanager
 
 from ..read import parallel
 
 # typing only for type checkers
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Iterator
-
     from .histogram import Histogram
 
 
@@ -42,7 +39,8 @@ def draw(histogram: Histogram) -> tuple[bytes, str]:
 
 class Figure5Drawing(parallel.Beside):
     """Figure 5, drawn by a forked process (:meth:`start`) or here; the process
-    holds a CPU while it runs."""
+    holds a CPU while it runs. ``with Figure5Drawing() as drawing:`` starts it,
+    and ends its process with the block."""
 
     def __init__(self) -> None:
         # draw() looked up when called: it may be replaced (tests).
@@ -51,14 +49,3 @@ class Figure5Drawing(parallel.Beside):
 
 def _import_figures() -> None:
     from . import figures  # noqa: F401  matplotlib, while the parent reads
-
-
-@contextmanager
-def started() -> Iterator[Figure5Drawing]:
-    """A :class:`Figure5Drawing` started now, whose process is ended with the block."""
-    drawing = Figure5Drawing()
-    drawing.start()
-    try:
-        yield drawing
-    finally:
-        drawing.stop()
