@@ -247,7 +247,9 @@ def _lensfun_camera(
         # Without --real-focal, the entry's own (its attribute, else <real-focal-length>).
         camera = lensfun_camera(found, width, height, crop, real_focal=real_focal)
     except ProjectionError as error:
-        fail(f"{named if entry else f'{found.file}:{found.line}'}: {error}")
+        # FILE:LINE as given, else where the lens found by name is.
+        where = named if entry else f"{found.file}:{found.line}"
+        fail(f"{where}: {error}")
     # Said once the points are projected: a problem is then the one line on stderr.
     return camera, f"lensaudit project: {found.lens} at {found.focal:g} mm, from {named}"
 
