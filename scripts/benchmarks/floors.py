@@ -6,6 +6,7 @@ timed here alone, as fresh processes in turns with liblensfun's load and the
 commands themselves, so that a goal stated as a multiple of liblensfun's load
 can be set against what is left of it for lensaudit's own work.
 
+- "import lensfunpy alone": what liblensfun's load spends before it reads a file.
 - "imports of a check": click, lxml and numpy (numpy with one BLAS thread, as
   lensaudit asks for it; liblensfun's load imports numpy with lensfunpy, with
   the default thread pool).
@@ -80,6 +81,7 @@ def run(quick: bool) -> list[dict]:
     database = str(bundled_database_path())
     runs: Runs = {
         "liblensfun load (lensfunpy.Database)": (BASELINE, ""),
+        "import lensfunpy alone (numpy with it)": ([sys.executable, "-c", "import lensfunpy"], ""),
         "interpreter alone (python -c pass)": ([sys.executable, "-c", "pass"], ""),
         "imports of a check (click, lxml, numpy)": (floor_command("imports", database), ""),
         "floor of a check: imports, every file parsed": (floor_command("check", database), ""),
