@@ -88,6 +88,28 @@ def test_a_copy_of_a_known_folding_entry_under_a_new_lens_is_new(tmp_path):
     assert new(result) == [("fold-in-image", "a.xml", line_of(after, "focal", 2))]
 
 
+def test_a_copy_of_a_known_folding_entry_is_new_when_the_change_also_fixes_the_original(
+    tmp_path,
+):
+    # A new lens copied from an old one with its folding entry, and the old
+    # entry refitted in the same change: the old lens keeps its name, so the
+    # baseline's fold is resolved, not the copy's.
+    refitted = FOLDING.replace("-0.3", "0.01")
+    before = xml(lens("Lens B", FOLDING))
+    after = xml(lens("Lens B", refitted), lens("Lens B Mark II", FOLDING))
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert new(result) == [("fold-in-image", "a.xml", line_of(after, "focal", 2))]
+    assert result.resolved == 1
+
+
+def test_a_renamed_lens_keeps_its_fold_known_when_another_lens_takes_no_name_of_it(tmp_path):
+    # The rename, with an entry of another lens edited in the same change.
+    before = xml(lens("Lens A", FINE), lens("Lens B", FOLDING))
+    after = xml(lens("Lens A", FINE.replace("0.01", "0.02")), lens("Lens B Mark II", FOLDING))
+    result = compare(tmp_path, {"a.xml": before}, {"a.xml": after})
+    assert new(result) == [] and result.resolved == 0
+
+
 def test_a_known_fold_moved_to_another_file_stays_known(tmp_path):
     folding = lens("Lens B", FOLDING)
     before = {"a.xml": xml(folding, lens("Lens A", FINE)), "b.xml": xml(lens("Lens Z", FINE))}

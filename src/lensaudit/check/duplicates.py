@@ -68,7 +68,7 @@ class Known:
             self._lenses = {}
             for file in self._read:
                 for lens in file.lenses:
-                    self._lenses.setdefault(_lens_key(lens), []).append((file, lens.index))
+                    self._lenses.setdefault(lens_key(lens), []).append((file, lens.index))
         for file, index in self._lenses.get(key, ()):
             if id(file) not in self._contents:
                 self._contents[id(file)] = lens_contents(file)
@@ -77,7 +77,8 @@ class Known:
         return False
 
 
-def _lens_key(lens: LensRecord) -> tuple:
+def lens_key(lens: LensRecord) -> tuple:
+    """A lens as the duplicate rules compare lenses: maker, model and crop factor."""
     return normalized_name(lens.maker), normalized_name(lens.model), lens.crop_factor
 
 
@@ -167,7 +168,7 @@ def duplicate_lenses(
         if file.problem is not None:
             continue
         for lens in file.lenses:
-            key = _lens_key(lens)
+            key = lens_key(lens)
             earlier_index, earlier_file, earlier = first.setdefault(key, (index, file, lens))
             if earlier is lens:
                 continue

@@ -133,17 +133,25 @@ def compare(
     Matching goes from the most specific key to the least: first every
     finding that has an unmatched baseline finding with its first key, then
     those left by their second key, and so on; each baseline finding matches
-    once. Findings in a file whose baseline could not be read are known too,
-    but for its own file-level finding.
+    once. A second key that is the first without its last item (the lens's
+    name) stands for a renamed lens: a baseline finding matches by it only
+    where no lens of the database checked has that name any more, so that
+    a copy of a known finding under a new lens is new even when the change
+    also edits the original. Findings in a file whose baseline could not be
+    read are known too, but for its own file-level finding.
     """
     used = [False] * len(before)
     known = [False] * len(current)
+    present = lens_names(read)
     tiers = max((len(item.keys) for item in (*current, *before)), default=0)
     for tier in range(tiers):
         pool: dict[Hashable, list[int]] = {}
         for position, item in enumerate(before):
-            if not used[position] and tier < len(item.keys):
-                pool.setdefault(item.keys[tier], []).append(position)
+            if used[position] or tier >= len(item.keys):
+                continue
+            if tier == 1 and _renamed_lens(item.keys) in present:
+                continue  # the lens was not renamed: its finding is not another's
+            pool.setdefault(item.keys[tier], []).append(position)
         for position, item in enumerate(current):
             if known[position] or tier >= len(item.keys):
                 continue
@@ -166,6 +174,37 @@ def compare(
         for position, item in enumerate(before)
     )
     return findings, resolved
+
+
+def lens_names(read: Sequence[ParsedSource]) -> set[Hashable]:
+    """The name of every lens of the files, as the findings' keys hold it: by
+    :func:`lens_identity`, and as the duplicate rules compare lenses (with
+    their crop factor)."""
+    from .duplicates import lens_key  # duplicates imports this module
+
+    names: set[Hashable] = set()
+    for file in read:
+        for lens in file.lenses:
+            names.add(lens_identity(lens.maker, lens.model))
+            names.add(lens_key(lens))
+    return names
+
+
+_NO_LENS = object()
+
+
+def _renamed_lens(keys: tuple[Hashable, ...]) -> Hashable:
+    """The lens a finding's second key leaves out, where that key is its first
+    without its last item (see :func:`compare`); else a name no lens has."""
+    first, second = keys[0], keys[1]
+    if (
+        isinstance(first, tuple)
+        and isinstance(second, tuple)
+        and len(first) == len(second) + 1
+        and first[:-1] == second
+    ):
+        return first[-1]
+    return _NO_LENS
 
 
 def baseline_notices(
