@@ -10,6 +10,7 @@ import io
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -212,6 +213,121 @@ def test_ci_md_counts_todays_folds(lensfun_history_run):
     folds = [r for r in rows(out / "introduced.csv") if r["folds_in_image"] == "true"]
     quoted = re.search(r"brought all (\d+) entries that fold", doc("docs/ci.md"))
     assert int(quoted[1]) == len(folds)
+
+
+# ------------------------------------------------------- docs/ci.md's examples
+
+
+@pytest.fixture(scope="module")
+def lensfun_checkout(tmp_path_factory) -> Path:
+    """A clone of the Lensfun history bundle to change, as docs/ci.md's examples do."""
+    if not BUNDLE.is_file():
+        pytest.skip(f"the Lensfun history bundle is not at {BUNDLE}")
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    clone = tmp_path_factory.mktemp("ci-examples") / "lensfun"
+    subprocess.run(["git", "clone", "-q", str(BUNDLE), str(clone)], check=True, timeout=600)
+    return clone
+
+
+def check_in(checkout: Path, baseline: str, change=None) -> tuple[int, list[str]]:
+    """`lensaudit check data/db --baseline BASELINE` in the checkout, with
+    ``change`` (a function of slr-tokina.xml's lines) made first and undone after."""
+    path = checkout / "data" / "db" / "slr-tokina.xml"
+    original = path.read_bytes()
+    if change is not None:
+        lines = original.decode("utf-8").splitlines(keepends=True)
+        path.write_text("".join(change(lines)), encoding="utf-8")
+    try:
+        command = [sys.executable, "-m", "lensaudit", "check", "data/db", "--baseline", baseline]
+        result = subprocess.run(
+            [*command, "--no-cache"], cwd=checkout, capture_output=True, text=True, timeout=600
+        )
+    finally:
+        path.write_bytes(original)
+    return result.returncode, result.stdout.splitlines()
+
+
+def quoted_runs(command: str) -> list[list[str]]:
+    """Each block of docs/ci.md that follows ``$ command``."""
+    text = doc("docs/ci.md")
+    starts = [m.end() for m in re.finditer(re.escape(f"$ {command}\n"), text)]
+    return [block_after(text[start - len(command) - 3 :], command) for start in starts]
+
+
+def assert_quoted_run(quoted: list[str], live: list[str]) -> None:
+    """A quoted run is the live one, its known findings elided as "... (N known findings)"."""
+    head = quoted.index("Known from baseline HEAD (not failing):")
+    assert quoted[:head] == live[: live.index(quoted[head])]
+    known = [line for line in live if line.startswith("  ")]
+    position = 0
+    for line in quoted[head + 1 :]:
+        elided = re.fullmatch(r"  \.\.\. \((\d+) (?:more )?known findings\)", line)
+        if elided:
+            position += int(elided[1])
+        elif line.startswith("  "):
+            assert known[position] == line
+            position += 1
+    assert position == len(known)
+    summary = next(line for line in quoted if line.startswith("lensaudit check FAILED"))
+    assert summary == live[-1]
+
+
+def test_ci_md_example_of_a_change_is_todays_output(lensfun_checkout):
+    added = (
+        '            <distortion model="poly3" focal="14.5" k1="-0.3"/>\n'
+        '            <distortion model="ptlens" focal="15.5" a="0.01" b="nan" c="0"/>\n'
+    )
+    assert added in doc("docs/ci.md")
+    status, live = check_in(
+        lensfun_checkout, "HEAD", lambda lines: [*lines[:20], added, *lines[20:]]
+    )
+    quoted = quoted_runs("lensaudit check data/db --baseline HEAD")[0]
+    assert_quoted_run(quoted, live)
+    text = doc("docs/ci.md")
+    after = text.index(quoted[-1]) + len(quoted[-1])
+    assert text[after:].startswith(f"\n$ echo $?\n{status}\n")
+
+
+def test_ci_md_example_of_a_broken_file_is_todays_output(lensfun_checkout):
+    def broken(lines):
+        assert lines[18].rstrip().endswith("/>")
+        return [*lines[:18], lines[18].rstrip()[:-2] + "\n", *lines[19:]]
+
+    status, live = check_in(lensfun_checkout, "HEAD", broken)
+    assert status == 1
+    assert_quoted_run(quoted_runs("lensaudit check data/db --baseline HEAD")[1], live)
+
+
+def test_ci_md_counts_of_a_check_against_300_commits_before(lensfun_checkout):
+    status, live = check_in(lensfun_checkout, "HEAD~300")
+    assert status == 1
+    new = [line for line in live if not line.startswith("  ")]
+    codes = {}
+    for line in new:
+        found = re.search(r": (error|warning) \[([a-z-]+)\]", line)
+        if found:
+            codes[found.groups()] = codes.get(found.groups(), 0) + 1
+    text = " ".join(doc("docs/ci.md").split())
+    quoted = re.search(
+        r"--baseline HEAD~300` at commit \w+ finds (\d+) new errors \(a second 500 mm entry "
+        r"for the Canon RF 200-800mm, and (\d+) vignetting corrections that divide by zero "
+        r"inside the image\) and (\d+) new warnings \((\d+) vignetting corrections below 0\.1, "
+        r"(\d+) that brighten the image beyond its centre, and (\d+) lenses on a mount no file "
+        r"defines\);.*? (\d+) findings are known and (\d+) is resolved",
+        text,
+    )
+    assert quoted
+    errors, zero, warnings, low, bright, mounts, known, resolved = map(int, quoted.groups())
+    assert codes == {
+        ("error", "duplicate-focal"): errors - zero,
+        ("error", "vignetting-zero-in-image"): zero,
+        ("warning", "vignetting-low-in-image"): low,
+        ("warning", "vignetting-brightens"): bright,
+        ("warning", "undefined-mount"): mounts,
+    }
+    assert low + bright + mounts == warnings
+    assert live[-1].endswith(f"; {known} known from baseline HEAD~300, {resolved} resolved")
 
 
 # --------------------------------------------------------- docs/vignetting.md
