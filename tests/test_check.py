@@ -346,6 +346,17 @@ def test_baseline_directory_without_xml_cannot_be_checked(two_databases, tmp_pat
         check(after, baseline=tmp_path / "empty")
 
 
+def test_a_lensfun_checkout_given_as_baseline_directory_means_its_data_db(tmp_path):
+    # A worktree of the database's repository at the base of a pull request.
+    (tmp_path / "checkout" / "data" / "db").mkdir(parents=True)
+    (tmp_path / "checkout" / "data" / "db" / "db.xml").write_text(lens_xml(FOLDING))
+    (tmp_path / "after").mkdir()
+    (tmp_path / "after" / "db.xml").write_text(lens_xml(FINE, FOLDING))
+    result = check(tmp_path / "after", baseline=tmp_path / "checkout")
+    assert [(f.code, f.known) for f in result.findings] == [("fold-in-image", True)]
+    assert not result.failed
+
+
 # -- the real database -------------------------------------------------------------
 
 

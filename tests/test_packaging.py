@@ -11,6 +11,7 @@ from __future__ import annotations
 import email.parser
 import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -218,6 +219,17 @@ def choose_baseline(repo: Path, tmp_path: Path, **event: str) -> str:
     (line,) = output.read_text().splitlines()
     assert line.startswith("baseline=")
     return line.removeprefix("baseline=")
+
+
+def test_workflow_keeps_the_cache_directory_lensaudit_uses_on_a_runner(monkeypatch, tmp_path):
+    from lensaudit.read.cache import cache_dir
+
+    path = re.search(r"uses: actions/cache@v\d+\n\s+with:\n\s+path: (\S+)", workflow_text())
+    assert path
+    monkeypatch.setenv("HOME", str(tmp_path))  # a runner: no $XDG_CACHE_HOME, no override
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.delenv("LENSAUDIT_CACHE_DIR", raising=False)
+    assert cache_dir() == Path(path[1].replace("~", str(tmp_path), 1))
 
 
 def test_workflow_runs_on_push_and_on_pull_request():

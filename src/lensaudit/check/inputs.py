@@ -17,7 +17,7 @@ from pathlib import Path
 
 from .. import git as gitlayer
 from .. import read as reader
-from ..read.paths import display_path, expand, read_file, reason
+from ..read.paths import database_directory, display_path, expand, read_file, reason
 from ..read.records import STATUS_OK, LoadError
 from .result import CheckError
 
@@ -91,10 +91,12 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
 
 
 def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> list[Source]:
-    """The baseline's files: ``baseline`` itself if it exists on disk, else the
-    same ``paths`` at git revision ``baseline``."""
-    if Path(baseline).exists():
-        return sources_from_paths([baseline])
+    """The baseline's files: ``baseline`` itself if it exists on disk (a
+    Lensfun checkout meaning its ``data/db``), else the same ``paths`` at git
+    revision ``baseline``."""
+    given = Path(baseline)
+    if given.exists():
+        return sources_from_paths([database_directory(given) if given.is_dir() else given])
     return sources_from_git(paths, baseline)
 
 
