@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import random
+import warnings
 from fractions import Fraction
 
 import numpy as np
 import pytest
 import sympy
 
-from lensaudit import normalizer
+from lensaudit import metrics, normalizer
 
 r = sympy.Symbol("r", positive=True)
 
@@ -118,3 +119,23 @@ def test_evaluate_matches_the_model_formula(seed):
 def test_leading_sign_is_the_sign_at_infinity():
     rows = np.array([[-0.1, 0.2, 0, 1, 0], [0, 0.2, 0, 1, 0], [0, 0, 0, 1, 0], [0, -1e-9, 5, 1, 0]])
     assert normalizer.leading_sign(rows).tolist() == [-1, 1, 1, -1]
+
+
+@pytest.mark.parametrize(
+    ("build", "coefficients"),
+    [
+        (normalizer.ptlens, (1e308, -1e308, 1e308)),
+        (normalizer.ptlens, (-1e308, -1e308, -1e308)),
+        (normalizer.poly3, (1e308,)),
+        (normalizer.poly5, (1e308, -1e308)),
+        (normalizer.basic_polynomial, (1e308, 1e308, -1e308)),
+        (normalizer.brown_conrady, (0.0, 0.0, -3e307)),
+    ],
+)
+def test_coefficients_near_the_largest_double_make_no_warning(build, coefficients):
+    # The cubic overflows (inf or NaN there): metrics.compute and the cameras of
+    # lensaudit.projection decide such models exactly; no RuntimeWarning on the way.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cubic = build(*coefficients)
+        metrics.cubic_r_max(cubic)

@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import normalizer
 from .solver import kernel
 from .solver.arrays import min_positive_root
+from .solver.constants import SMALLEST_NORMAL
 
 # Exact arithmetic is imported where it is needed: few inputs ever take that path.
 if TYPE_CHECKING:
@@ -58,7 +59,11 @@ def cubic_r_max(cubic: normalizer.Cubic) -> FloatArray:
     """r_max of a normalized model: where D' first changes sign from + to -.
 
     0 where D'(0) <= 0 (the model decreases from the centre), ``inf`` where D
-    is increasing on (0, inf), NaN for NaN coefficients.
+    is increasing on (0, inf) or first turns beyond the largest double, NaN
+    for NaN coefficients and where the cubic overflows (coefficients beyond
+    about 1e307). The float answer of a cubic whose coefficients are
+    subnormal, or whose first turn is beyond w = 1.8e308, may be wrong:
+    :func:`compute` decides those exactly, as it does overflows.
     """
     w = min_positive_root(cubic.a, cubic.b, cubic.c)
     w = np.asarray(w, dtype=np.float64)
@@ -77,6 +82,55 @@ def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArra
         )
     tail = np.where(finite, normalizer.leading_sign(cubic.distortion), 0).astype(np.int8)
     return r_max, d_max, tail
+
+
+#: A Cauchy bound of the cubic's roots up to this leaves none beyond the largest double.
+_ROOTS_IN_RANGE = 2.0**1020
+
+
+def roots_in_range(a: FloatArray, b: FloatArray, c: FloatArray) -> NDArray[np.bool_]:
+    """Where 1 + a w + b w^2 + c w^3 certainly changes sign at no w beyond the
+    largest double: no coefficient is negative (no positive root at all), or
+    Cauchy's bound on the roots, 1 + max |other coefficient / leading one|,
+    stays below :data:`_ROOTS_IN_RANGE`. (Elsewhere a float answer of inf may
+    be a root beyond the largest double.)"""
+    with np.errstate(all="ignore"):
+        cubic = np.maximum(np.maximum(abs(1 / c), abs(a / c)), abs(b / c))
+        quadratic = np.maximum(abs(1 / b), abs(a / b))
+        bound = 1 + np.where(c != 0, cubic, np.where(b != 0, quadratic, abs(1 / a)))
+    return ((a >= 0) & (b >= 0) & (c >= 0)) | (bound <= _ROOTS_IN_RANGE)
+
+
+def needs_exact(cubic: normalizer.Cubic, r_max: ArrayLike, d_max: ArrayLike) -> NDArray[np.bool_]:
+    """Where (r_max, d_max) of :func:`model_r_max` may be wrong, for
+    :func:`exact_model_r_max` to decide: the cubic or D(r_max) overflowed
+    (coefficients near 1e308), the cubic lost digits (:func:`subnormal_cubic`),
+    or r_max is inf where, for w = r^2, the first turn may lie beyond w =
+    1.8e308 (:func:`roots_in_range`)."""
+    r_max, d_max = np.asarray(r_max, dtype=np.float64), np.asarray(d_max, dtype=np.float64)
+    found = np.isnan(r_max) | (np.isfinite(r_max) & ~np.isfinite(d_max))
+    if cubic.power == 2:
+        found = found | (np.isinf(r_max) & ~roots_in_range(cubic.a, cubic.b, cubic.c))
+    return found | subnormal_cubic(cubic)
+
+
+def subnormal_cubic(cubic: normalizer.Cubic) -> NDArray[np.bool_]:
+    """Where the cubic's float coefficients may have lost digits: D'(0) or a
+    coefficient is subnormal, or a coefficient underflowed to 0 from a term of
+    D that is not 0."""
+    distortion = cubic.distortion
+    degree = distortion.shape[-1] - 1
+    found = _subnormal(cubic.slope_at_centre)
+    for m, x in enumerate((cubic.a, cubic.b, cubic.c), start=1):
+        power = cubic.power * m + 1  # the term of D whose derivative is w^m's
+        given = distortion[..., degree - power] != 0 if power <= degree else False
+        found = found | _subnormal(x) | ((x == 0) & given)
+    return found
+
+
+def _subnormal(x: ArrayLike) -> NDArray[np.bool_]:
+    magnitude = np.abs(np.asarray(x, dtype=np.float64))
+    return (magnitude > 0) & (magnitude < SMALLEST_NORMAL)
 
 
 def exact_distortion(
@@ -110,10 +164,14 @@ def exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, fl
     ``distortion`` holds D(r)'s coefficients, highest power first, as in
     :attr:`normalizer.Cubic.distortion`; w = r**power in the cubic.
 
-    For models whose cubic overflows binary64 (coefficients near 1e308):
-    the cubic is formed exactly, scaled as w = 2^k v so that its coefficients
-    fit (k <= 0, even for w = r^2), rounded once and solved; d_max = D(r_max)
-    is evaluated exactly and rounded once, so no intermediate overflows.
+    For models whose cubic overflows binary64 (coefficients near 1e308) or
+    loses digits in it (subnormal coefficients), or whose first turn may lie
+    beyond w = 1.8e308: the cubic is formed exactly, scaled as w = 2^k v so
+    that its coefficients fit (k as near 0 as leaves none overflowing or
+    subnormal; even for w = r^2), rounded once and solved, and solved again
+    scaled as far down as it fits where it has no root below the largest
+    double; d_max = D(r_max) is evaluated exactly and rounded once, so no
+    intermediate overflows.
     """
     from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
 
@@ -125,16 +183,7 @@ def exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, fl
     tail = (leading > 0) - (leading < 0)
     if cubic[0] <= 0:  # not increasing at the centre: no valid domain
         return 0.0, 0.0, tail
-    normalized = [x / cubic[0] for x in cubic[1:]]
-    k = 0
-    for m, x in enumerate(normalized, start=1):
-        if x != 0:
-            size = x.numerator.bit_length() - x.denominator.bit_length()  # log2|x| within 1
-            k = min(k, (1000 - size) // m)
-    k -= k % power
-    scaled = [_nearest_double(x * Fraction(2) ** (m * k)) for m, x in enumerate(normalized, 1)]
-    w = min_positive_root(*scaled)
-    r_max = math.ldexp(w, k) if power == 1 else math.ldexp(math.sqrt(w), k // 2)
+    r_max = _first_turn([x / cubic[0] for x in cubic[1:]], power)
     if not math.isfinite(r_max):
         return r_max, r_max, 0
     r = Fraction(r_max)
@@ -142,6 +191,52 @@ def exact_model_r_max(distortion: list[Fraction], power: int) -> tuple[float, fl
     for x in distortion:
         d_max = d_max * r + x
     return r_max, _nearest_double(d_max), tail
+
+
+def _first_turn(normalized: list[Fraction], power: int) -> float:
+    """r_max of 1 + x1 w + x2 w^2 + x3 w^3 (the exact x's, w = r**power), as
+    :func:`exact_model_r_max` finds it."""
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
+
+    # The scales that overflow no coefficient (k <= highest) and leave none
+    # subnormal (k >= lowest); log2|x| is size within 1.
+    highest = lowest = None
+    for m, x in enumerate(normalized, start=1):
+        if x != 0:
+            size = x.numerator.bit_length() - x.denominator.bit_length()
+            top, bottom = (1000 - size) // m, -((1000 + size) // m)
+            highest = top if highest is None else min(highest, top)
+            lowest = bottom if lowest is None else max(lowest, bottom)
+    k = 0 if highest is None or lowest is None else min(max(0, lowest), highest)
+    w, k = _scaled_root(normalized, k - k % power)
+    if w == math.inf and highest is not None and highest - highest % power > k:
+        w, k = _scaled_root(normalized, highest - highest % power)  # a root beyond 1.8e308?
+    if w == math.inf and power == 2 and normalized[1] != 0 and normalized[2] == 0:
+        # 1 + w (x1 + x2 w) with coefficients too far apart to scale into binary64:
+        # where w x1 exceeds 2^1000, 1 is nothing beside it, and the sign changes
+        # at -x1 / x2 within a part in 2^1000.
+        turn = -normalized[0] / normalized[1]
+        if turn > Fraction(2) ** (k + 1000):
+            half = (turn.numerator.bit_length() - turn.denominator.bit_length()) // 2
+            return _ldexp(math.sqrt(float(turn / Fraction(4) ** half)), half)
+    return _ldexp(w, k) if power == 1 else _ldexp(math.sqrt(w), k // 2)
+
+
+def _scaled_root(normalized: list[Fraction], k: int) -> tuple[float, int]:
+    """The smallest positive sign change v of the cubic scaled as w = 2^k v,
+    its coefficients rounded once; and k."""
+    from fractions import Fraction  # fractions: only for the exact fallback, rarely reached
+
+    scaled = [_nearest_double(x * Fraction(2) ** (m * k)) for m, x in enumerate(normalized, 1)]
+    return float(min_positive_root(*scaled)), k
+
+
+def _ldexp(x: float, exponent: int) -> float:
+    """x * 2^exponent, inf beyond the largest double (math.ldexp raises there)."""
+    try:
+        return math.ldexp(x, exponent)
+    except OverflowError:
+        return math.copysign(math.inf, x)
 
 
 def image_corner(aspect_ratio: ArrayLike) -> FloatArray:
@@ -227,13 +322,13 @@ def compute(
         if not rows.size:
             continue
         with np.errstate(all="ignore"):  # overflow in the cubic is handled below
-            r_max[rows], d_max[rows], tail[rows] = model_r_max(build(rows))
-        # Coefficients near the top of the binary64 range overflow the cubic or
-        # D(r_max) on the way: those rows again, exactly (few, if any).
-        overflowed = rows[
-            np.isnan(r_max[rows]) | (np.isfinite(r_max[rows]) & ~np.isfinite(d_max[rows]))
-        ]
-        for row in overflowed:
+            cubic = build(rows)
+            r_max[rows], d_max[rows], tail[rows] = model_r_max(cubic)
+        # Coefficients near the ends of the binary64 range overflow the cubic or
+        # D(r_max) on the way, or lose digits in the cubic, and a first turn
+        # beyond w = 1.8e308 is inf as a float: those rows again, exactly (few,
+        # if any).
+        for row in rows[needs_exact(cubic, r_max[rows], d_max[rows])]:
             raw = [float(columns[n][row]) for n in ("a", "b", "c", "k1", "k2")]
             used = {"ptlens": raw[:3], "poly3": raw[3:4], "poly5": raw[3:]}[name]
             if all(math.isfinite(x) for x in used):

@@ -53,10 +53,11 @@ def ptlens_constant(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> FloatArray:
     and of mixed sign.
     """
     a, b, c = (np.asarray(x, dtype=np.float64) for x in (a, b, c))
-    total, error = _two_sum(np.ones_like(a + b + c), -a)
-    total, e2 = _two_sum(total, -b)
-    total, e3 = _two_sum(total, -c)
-    return total + (error + e2 + e3)
+    with np.errstate(all="ignore"):  # inf or NaN where it overflows: the metrics see to it
+        total, error = _two_sum(np.ones_like(a + b + c), -a)
+        total, e2 = _two_sum(total, -b)
+        total, e3 = _two_sum(total, -c)
+        return total + (error + e2 + e3)
 
 
 def ptlens(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> Cubic:
@@ -67,7 +68,7 @@ def ptlens(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> Cubic:
     """
     a, b, c = (np.asarray(x, dtype=np.float64) for x in (a, b, c))
     d = ptlens_constant(a, b, c)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):  # inf or NaN where it overflows: the metrics see to it
         cubic = (2 * c / d, 3 * b / d, 4 * a / d)
     zero = np.zeros_like(d)
     distortion = np.stack(np.broadcast_arrays(a, b, c, d, zero), axis=-1)
@@ -83,7 +84,7 @@ def poly3(k1: ArrayLike) -> Cubic:
     k1 = np.asarray(k1, dtype=np.float64)
     d = 1.0 - k1
     zero = np.zeros_like(d)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         a = 3 * k1 / d
     distortion = np.stack(np.broadcast_arrays(k1, zero, d, zero), axis=-1)
     return Cubic(a, zero, zero, power=2, slope_at_centre=d, distortion=distortion)
@@ -99,7 +100,8 @@ def poly5(k1: ArrayLike, k2: ArrayLike) -> Cubic:
     zero = np.zeros_like(k1)
     one = np.ones_like(k1)
     distortion = np.stack((k2, zero, k1, zero, one, zero), axis=-1)
-    return Cubic(3 * k1, 5 * k2, zero, power=2, slope_at_centre=one, distortion=distortion)
+    with np.errstate(over="ignore"):
+        return Cubic(3 * k1, 5 * k2, zero, power=2, slope_at_centre=one, distortion=distortion)
 
 
 def basic_polynomial(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike) -> Cubic:
@@ -111,7 +113,8 @@ def basic_polynomial(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike) -> Cubic:
     zero = np.zeros_like(k1)
     one = np.ones_like(k1)
     distortion = np.stack((k3, k2, k1, one, zero), axis=-1)
-    return Cubic(2 * k1, 3 * k2, 4 * k3, power=1, slope_at_centre=one, distortion=distortion)
+    with np.errstate(over="ignore"):
+        return Cubic(2 * k1, 3 * k2, 4 * k3, power=1, slope_at_centre=one, distortion=distortion)
 
 
 def brown_conrady(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike) -> Cubic:
@@ -124,7 +127,8 @@ def brown_conrady(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike) -> Cubic:
     zero = np.zeros_like(k1)
     one = np.ones_like(k1)
     distortion = np.stack((k3, zero, k2, zero, k1, zero, one, zero), axis=-1)
-    return Cubic(3 * k1, 5 * k2, 7 * k3, power=2, slope_at_centre=one, distortion=distortion)
+    with np.errstate(over="ignore"):
+        return Cubic(3 * k1, 5 * k2, 7 * k3, power=2, slope_at_centre=one, distortion=distortion)
 
 
 def evaluate(distortion: FloatArray, r: ArrayLike) -> FloatArray:

@@ -248,15 +248,16 @@ def _domain(
 ) -> tuple[float, float]:
     """(r_max, d_max) of one model, in the units of its D(r).
 
-    In binary64, except where it overflows on the way (coefficients near
-    1e308): there from the model's exact coefficients, as the metrics do.
+    In binary64, except where that may be wrong (see
+    :func:`lensaudit.metrics.needs_exact`): there from the model's exact
+    coefficients, as the metrics do.
     """
     with np.errstate(all="ignore"):
         r_max, d_max, _ = metrics.model_r_max(cubic)
-    r_max, d_max = float(r_max), float(d_max)
-    if math.isnan(r_max) or (math.isfinite(r_max) and not math.isfinite(d_max)):
-        r_max, d_max, _ = metrics.exact_model_r_max(exact_distortion(), cubic.power)
-    return r_max, d_max
+        exact = bool(np.any(metrics.needs_exact(cubic, r_max, d_max)))
+    if exact:
+        return metrics.exact_model_r_max(exact_distortion(), cubic.power)[:2]
+    return float(r_max), float(d_max)
 
 
 def _exact(values: list[float]) -> list[Fraction]:

@@ -288,7 +288,8 @@ def _certified(x: float, A: float, B: float, C: float, t: int) -> float | None:
 
 def _cubic(model: str, a: float, b: float, c: float, k1: float, k2: float) -> tuple:
     """normalizer.ptlens, poly3 or poly5 of one entry: (a, b, c, power, slope at
-    the centre, coefficients of D(r) highest power first)."""
+    the centre, coefficients of D(r) highest power first, and whether the cubic
+    lost digits: metrics.subnormal_cubic)."""
     if model == "ptlens":
         # normalizer.ptlens_constant: 1 - a - b - c with error-free sums.
         total = 1.0 - a
@@ -303,18 +304,39 @@ def _cubic(model: str, a: float, b: float, c: float, k1: float, k2: float) -> tu
         z = total - partial
         e3 = (partial - (total - z)) + (-c - z)
         d = total + (error + e2 + e3)
-        return (
-            _divide(2 * c, d),
-            _divide(3 * b, d),
-            _divide(4 * a, d),
-            1,
-            d,
-            (a, b, c, d, 0.0),
+        x1, x2, x3 = _divide(2 * c, d), _divide(3 * b, d), _divide(4 * a, d)
+        # A term of D that is not 0 whose coefficient in the cubic is subnormal or
+        # 0, or a subnormal D'(0) (a cubic coefficient is 0 where its term is).
+        lost = (
+            -_SMALLEST_NORMAL < d < _SMALLEST_NORMAL
+            or (c != 0 and abs(x1) < _SMALLEST_NORMAL)
+            or (b != 0 and abs(x2) < _SMALLEST_NORMAL)
+            or (a != 0 and abs(x3) < _SMALLEST_NORMAL)
         )
+        return x1, x2, x3, 1, d, (a, b, c, d, 0.0), lost
     if model == "poly3":
         d = 1.0 - k1
-        return _divide(3 * k1, d), 0.0, 0.0, 2, d, (k1, 0.0, d, 0.0)
-    return 3 * k1, 5 * k2, 0.0, 2, 1.0, (k2, 0.0, k1, 0.0, 1.0, 0.0)
+        x1 = _divide(3 * k1, d)
+        lost = k1 != 0 and abs(x1) < _SMALLEST_NORMAL
+        return x1, 0.0, 0.0, 2, d, (k1, 0.0, d, 0.0), lost
+    x1, x2 = 3 * k1, 5 * k2
+    lost = (k1 != 0 and abs(x1) < _SMALLEST_NORMAL) or (k2 != 0 and abs(x2) < _SMALLEST_NORMAL)
+    return x1, x2, 0.0, 2, 1.0, (k2, 0.0, k1, 0.0, 1.0, 0.0), lost
+
+
+def _roots_in_range(a: float, b: float, c: float) -> bool:
+    """metrics.roots_in_range of one cubic with a negative coefficient (the same operations)."""
+    if c != 0:
+        bound = max(abs(_divide(1.0, c)), abs(a / c), abs(b / c))
+    elif b != 0:
+        bound = max(abs(_divide(1.0, b)), abs(a / b))
+    else:
+        bound = abs(_divide(1.0, a))
+    return 1 + bound <= _ROOTS_IN_RANGE
+
+
+#: metrics._ROOTS_IN_RANGE.
+_ROOTS_IN_RANGE = 2.0**1020
 
 
 def is_circular_fisheye(lens: str, lens_type: str) -> bool:
@@ -346,13 +368,22 @@ def entry_metrics(
 ) -> EntryMetrics | None:
     """:func:`lensaudit.metrics.compute` of one audited entry (the same floats), or
     None where the array code decides it by another path than the fast one."""
-    cubic_a, cubic_b, cubic_c, power, slope, distortion = _cubic(model, a, b, c, k1, k2)
+    cubic_a, cubic_b, cubic_c, power, slope, distortion, lost = _cubic(model, a, b, c, k1, k2)
     if slope > 0:
         if not (_isfinite(cubic_a) and _isfinite(cubic_b) and _isfinite(cubic_c)):
             return None  # overflowed: the exact path
+        if lost:
+            return None  # digits lost in the cubic: the exact path (metrics.subnormal_cubic)
         w = min_positive_root(cubic_a, cubic_b, cubic_c)
         if w is None:
             return None
+        if (
+            w == _INF
+            and power == 2
+            and not (cubic_a >= 0 and cubic_b >= 0 and cubic_c >= 0)
+            and not _roots_in_range(cubic_a, cubic_b, cubic_c)
+        ):
+            return None  # perhaps a root beyond 1.8e308: the exact path
         r_max = _sqrt(w) if power == 2 else w
     elif slope == slope:
         r_max = 0.0
