@@ -462,6 +462,21 @@ def test_unusable_entries_and_images_are_refused(write_xml):
         lensfun_camera(LensfunCalibration("poly3", focal=10.0), 600, 400, crop_factor=0)
 
 
+@pytest.mark.parametrize("size", [math.inf, -math.inf, math.nan])
+def test_image_sizes_that_are_not_whole_numbers_are_refused_in_one_line(size):
+    calibration = LensfunCalibration("ptlens", 24.0, a=0.01, b=-0.05, c=0.02)
+    camera = brown_conrady_camera(900, 900, 639.5, 359.5, -0.2)
+    calls = [
+        lambda: lensfun_camera(calibration, size, 4000),
+        lambda: brown_conrady_camera(900, 900, 0, 0, -0.2, 0, 0, size, 720),
+        lambda: valid_region_mask(size, 40, camera),
+        lambda: valid_region_mask(40, size, camera),
+    ]
+    for call in calls:
+        with pytest.raises(ProjectionError, match="integers"):
+            call()
+
+
 # --- OpenCV's Brown-Conrady model -------------------------------------------------------------
 
 

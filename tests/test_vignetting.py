@@ -696,3 +696,22 @@ def test_a_mutated_file_never_crashes_and_every_element_is_one_record(mutated):
         lines = [element.sourceline for element in root.iter(tag)]
         assert [r.line for r in records[head:]] == lines
         assert all(r.status != "xml_error" for r in records)
+
+
+def test_coefficients_that_are_not_finite_give_no_metrics_and_no_error():
+    # VignettingEntry's k1, k2, k3 default to NaN (with status "ok"): an entry made
+    # without them is audited as unknown, as TCA's are, not sent to exact arithmetic.
+    from lensaudit.calibrations import VignettingEntry
+    from lensaudit.vignetting import VignettingAudit
+
+    entry = VignettingEntry("f.xml", 1, "M", "L", "rectilinear", 1.0, 1.5, "pa", 50.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        record = VignettingAudit.of_entries([entry]).records()[0]
+        found = vignetting.compute(
+            [0.1, math.nan, -0.5], [0.0, 0.0, math.inf], [0.0] * 3, [1.0, 1.0, 1.0]
+        )
+    assert math.isnan(record["c_min"]) and record["severity"] == ""
+    assert math.isnan(found["c_min"][1]) and math.isnan(found["c_min"][2])
+    assert not found["zero_in_image"][1:].any() and list(found["severity"][1:]) == ["", ""]
+    assert found["c_min"][0] == 1.0

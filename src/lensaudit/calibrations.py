@@ -375,8 +375,8 @@ def sign_change_before(
 
     ``x`` is ``inf`` where there is none; it is accurate to about 1e-13
     relative (the kind of answer is exact; the value is float-rounded).
-    Any finite coefficients; ``limit`` may be ``inf``. NaN in any input
-    gives x = NaN and ``before`` False.
+    Any finite coefficients; ``limit`` may be ``inf``. A coefficient that is
+    not finite, or a NaN limit, gives x = NaN and ``before`` False.
     """
     import numpy as np  # numpy: only where arrays are needed, not on importing this module
 
@@ -390,7 +390,7 @@ def sign_change_before(
     doubtful = ~reliable | near | ~np.isfinite(limit) | ~(limit > _SAFE_LOW)
     x = x.copy()
     before = before.copy()
-    unknown = np.isnan(c1) | np.isnan(c2) | np.isnan(c3) | np.isnan(limit)
+    unknown = ~(np.isfinite(c1) & np.isfinite(c2) & np.isfinite(c3)) | np.isnan(limit)
     x[unknown] = np.nan
     before[unknown] = False
     for index in np.flatnonzero(doubtful & ~unknown):

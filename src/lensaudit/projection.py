@@ -277,7 +277,7 @@ def _check_size(width: int, height: int) -> tuple[int, int]:
         raise ProjectionError("image size must be two integers")
     try:
         w, h = int(width), int(height)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: int(inf)
         raise ProjectionError(f"image size {width}x{height} is not two integers") from None
     if w != width or h != height or w < 2 or h < 2:
         raise ProjectionError(f"image size {width}x{height}: need whole pixels, at least 2x2")
@@ -684,14 +684,11 @@ def _output_size(camera: RadialCamera, width: int | None, height: int | None) ->
     height = camera.height if height is None else height
     if width is None or height is None:
         raise ProjectionError("the output image size is needed")
-    if (
-        isinstance(width, bool)
-        or isinstance(height, bool)
-        or int(width) != width
-        or int(height) != height
-        or width < 1
-        or height < 1
-    ):
+    try:
+        whole = int(width) == width and int(height) == height
+    except (TypeError, ValueError, OverflowError):  # not numbers, NaN or inf
+        whole = False
+    if isinstance(width, bool) or isinstance(height, bool) or not whole or width < 1 or height < 1:
         raise ProjectionError(f"output size {width}x{height} is not two positive integers")
     return int(width), int(height)
 

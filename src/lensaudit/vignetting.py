@@ -238,7 +238,8 @@ def compute(
     k3: ArrayLike,
     r_corner: ArrayLike,
 ) -> dict[str, NDArray[Any]]:
-    """The metric columns (see the module docstring) of finite coefficients.
+    """The metric columns (see the module docstring) of finite coefficients;
+    where a coefficient or ``r_corner`` is not finite, NaN, no finding.
 
     ``r_corner`` is the radius of the image judged, r = 1 at half the
     diagonal. Returns arrays keyed by column name, ``severity`` as text.
@@ -253,7 +254,12 @@ def compute(
         zero_in_image = c_min <= 0
         low_in_image = c_min < LOW_CORRECTION
         brightens = c_max > BRIGHTENING
-    for index in np.flatnonzero(doubtful):
+    unknown = ~(np.isfinite(k1) & np.isfinite(k2) & np.isfinite(k3) & np.isfinite(w_image))
+    for values in (c_min, w_min, c_max, w_max):
+        values[unknown] = np.nan
+    for flags in (zero_in_image, low_in_image, brightens):
+        flags[unknown] = False
+    for index in np.flatnonzero(doubtful & ~unknown):
         a, b, c, w = (float(v[index]) for v in (k1, k2, k3, w_image))
         zero_in_image[index] = exact_below(a, b, c, w, Fraction(0), strict=False)
         low_in_image[index] = exact_below(a, b, c, w, _LOW_EXACT, strict=True)
