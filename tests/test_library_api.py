@@ -31,3 +31,29 @@ def test_the_paper_tokina_example_has_the_papers_mixed_unit_value(bundled_db):
     assert len(tokina) == 1
     assert round(float(tokina.r_normalized_paper.iloc[0]), 3) == 0.858
     assert bool(tokina.folds_in_image.iloc[0])
+
+
+def test_a_path_given_as_bytes_is_read_as_the_same_path_as_text(folding_db):
+    import os
+
+    as_text = lensaudit.audit(str(folding_db))
+    as_bytes = lensaudit.audit(os.fsencode(folding_db))
+    assert list(as_bytes.r_max) == list(as_text.r_max) and len(as_text) > 0
+    assert list(lensaudit.audit([os.fsencode(folding_db)]).file) == list(as_text.file)
+
+
+def test_paths_that_name_nothing_are_refused_in_one_line(folding_db):
+    import pytest
+
+    from lensaudit.check import check
+    from lensaudit.read import LoadError
+
+    # An empty list is not "no argument": the default database would hide a
+    # filter that left nothing.
+    for call in (lensaudit.audit, lensaudit.run, check):
+        with pytest.raises(LoadError, match="no path given"):
+            call([])
+        with pytest.raises(LoadError, match="NUL character"):
+            call(str(folding_db) + "\0x")
+        with pytest.raises(TypeError, match="paths must be a path or a sequence of paths"):
+            call(5)

@@ -5,8 +5,10 @@ maximum, r_max. lensaudit computes r_max for every model of a Lensfun
 database and compares it with the image corner.
 
 >>> import lensaudit
->>> frame = lensaudit.audit()            # the database bundled with lensfunpy
+>>> frame = lensaudit.audit()            # the database bundled with lensfunpy (*)
 >>> frame[frame.folds_in_image]          # entries that fold inside the image
+
+(*) Inside a Lensfun checkout, its ``data/db``, as for ``lensaudit scan``.
 
 The submodules follow the pipeline (:mod:`~lensaudit.pipeline`):
 :mod:`~lensaudit.read` (files to tables, the only code that reads XML),
@@ -38,7 +40,8 @@ def audit(
     """Audit a Lensfun database and return one row per distortion entry.
 
     ``path`` is a database directory, an XML file, a list of those, or None
-    for the database bundled with lensfunpy. Columns are
+    for the Lensfun checkout around the working directory, else the database
+    bundled with lensfunpy (as ``lensaudit scan`` without a path). Columns are
     :data:`lensaudit.pipeline.COLUMNS`; r_max and d_max are in Hugin units
     (1 = half the short side of the calibration image).
     """

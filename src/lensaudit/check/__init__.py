@@ -237,11 +237,9 @@ def check(
     """
     if not margin >= 1 or math.isinf(margin):
         raise CheckError(f"margin {margin} must be a finite number >= 1")
-    if isinstance(paths, (str, os.PathLike)):
-        paths = [paths]
     # resolve() maps a Lensfun checkout to its data/db (read.paths.database_directory),
     # for the baseline too, which is read at the same paths.
-    source = reader.resolve(list(paths) if paths else None)
+    source = reader.resolve(paths)
     sources = sources_from_paths(source.paths)
     if all(s.data is None for s in sources):
         raise CheckError(

@@ -24,7 +24,7 @@ MAX_FILE_BYTES = 256 << 20
 #: Where a Lensfun checkout keeps its database, relative to the checkout.
 CHECKOUT_DATABASE = Path("data", "db")
 
-Paths = Sequence[str | os.PathLike[str]] | str | os.PathLike[str] | None
+Paths = Sequence[str | bytes | os.PathLike[str]] | str | bytes | os.PathLike[str] | None
 
 
 class DatabaseSource(
@@ -94,13 +94,22 @@ def resolve(paths: Paths) -> DatabaseSource:
     """The database to read.
 
     ``paths`` if given, where a Lensfun checkout (or its ``data`` directory)
-    stands for its ``data/db``; without paths, the database of the Lensfun
+    stands for its ``data/db``; with None, the database of the Lensfun
     checkout the working directory is in, else lensfunpy's bundled one.
+    A path may be ``str``, ``bytes`` or ``os.PathLike``. Raises
+    :class:`LoadError` for an empty sequence of paths (reading the default
+    database instead would hide a filter that left nothing) and for a path
+    holding a NUL character; ``TypeError`` for what is not a path.
     """
-    if isinstance(paths, (str, os.PathLike)):
+    if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
-    if paths:
-        given = _unique(Path(p) for p in paths)
+    if paths is not None:
+        try:
+            given = _unique(_path(p) for p in paths)
+        except TypeError as error:
+            raise TypeError(f"paths must be a path or a sequence of paths: {error}") from None
+        if not given:
+            raise LoadError("no path given (None reads the default database)")
         resolved = tuple(database_directory(p) for p in given)
         return DatabaseSource(resolved, ", ".join(map(_describe, given, resolved)))
     here = enclosing_database()
@@ -113,6 +122,14 @@ def resolve(paths: Paths) -> DatabaseSource:
         f"Lensfun database bundled with lensfunpy {lensfunpy_version()} ({path})",
         bundled=True,
     )
+
+
+def _path(given: str | bytes | os.PathLike) -> Path:
+    """One path given, as a Path (bytes decoded as the file system does)."""
+    path = Path(os.fsdecode(given))
+    if "\0" in str(path):
+        raise LoadError(f"{display_path(path)}: a path cannot hold a NUL character")
+    return path
 
 
 def _unique(paths: Iterable[Path]) -> tuple[Path, ...]:
