@@ -231,6 +231,16 @@ def test_paper_vectorized_matches_paper_scalar_on_ordinary_cubics():
     np.testing.assert_allclose(vectorized, scalar, rtol=1e-9)
 
 
+@pytest.mark.parametrize(("a", "b", "c"), [(6.0, 6.0, 2.0), (0.0, 1e308, 1.0), (1e308, 0.0, -1.0)])
+def test_the_papers_algorithm_rounds_as_ieee_does_in_both_forms(a, b, c):
+    # 6, 6, 2: gamma = b^2 - 3ac = 0, so gamma / u divides by zero; 1e308: b^3 overflows.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scalar = min_positive_root_paper(a, b, c)
+        vectorized = float(min_positive_root_paper_vectorized(a, b, c))
+    assert scalar == vectorized or (math.isnan(scalar) and math.isnan(vectorized))
+
+
 def test_the_papers_algorithm_can_return_a_negative_radius():
     # 1 + w + w^2 + w^3 = (1 + w)(1 + w^2): its only real root is -1. Algorithm 1's
     # single-real-root branch returns it unchecked; there is no fold at all.

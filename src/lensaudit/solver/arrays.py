@@ -992,7 +992,15 @@ def min_positive_root_paper(a: float, b: float, c: float) -> float:
     Kept as the reference the robust :func:`min_positive_root` is measured
     against. Note that it tests "positive root", not "sign change", and has
     no guard for the rounding issues discussed in the module docstring.
+    Its arithmetic is IEEE's, as in :func:`min_positive_root_paper_vectorized`:
+    a division by zero or an overflow gives inf or NaN, not an exception.
     """
+    a, b, c = np.float64(a), np.float64(b), np.float64(c)
+    with np.errstate(all="ignore"):
+        return float(_paper_algorithm(a, b, c))
+
+
+def _paper_algorithm(a: np.float64, b: np.float64, c: np.float64) -> float:
     r = math.inf
     if c != 0:
         beta = 2 * b**3 - 9 * a * b * c + 27 * c**2
