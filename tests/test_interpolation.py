@@ -142,3 +142,12 @@ def test_every_interval_at_once_is_what_the_spline_takes_at_its_middle(focals):
     for low, high, start, end, terms in interval_terms(focals):
         assert (start, end, terms) == spline_terms(focals, (low + high) / 2)
     assert len(interval_terms(focals)) == len(set(focals)) - 1
+
+
+def test_no_calibration_interpolates_to_nothing_and_mismatches_are_refused():
+    assert weights([], 10.0) == [] and interpolated([], [], 10.0) == ()
+    with pytest.raises(ValueError, match="1 sequences of coefficients for 2 focal lengths"):
+        interpolated([[0.1]], [10.0, 20.0], 15.0)
+    for focal in (0.0, -5.0, math.nan):
+        with pytest.raises(ValueError, match="is not a positive number"):
+            weights([10.0, 20.0], focal)

@@ -158,7 +158,10 @@ def weights(focals: Sequence[float], focal: float) -> list[tuple[int, float]]:
     """(index, weight) pairs: the coefficients at ``focal`` are the sum of
     weight x the coefficients of calibration ``index``, for calibrations at
     ``focals``, in the order liblensfun meets them (which decides between
-    equal focal lengths); empty without calibrations."""
+    equal focal lengths); empty without calibrations. Raises ``ValueError``
+    for a focal length that is not a positive number."""
+    if not focal > 0:
+        raise ValueError(f"focal length {focal!r} is not a positive number")
     start, end, terms = spline_terms(focals, focal)
     if start is None or end is None:
         return [(index, 1.0) for index, _ in terms]
@@ -173,7 +176,15 @@ def interpolated(
     coefficients: Sequence[Sequence[float]], focals: Sequence[float], focal: float
 ) -> tuple[float, ...]:
     """The coefficients liblensfun applies at ``focal``, from calibrations with
-    ``coefficients`` (one sequence each, the model's order) at ``focals``."""
+    ``coefficients`` (one sequence each, the model's order) at ``focals``;
+    empty without calibrations. Raises ``ValueError`` where the two do not
+    pair up, and as :func:`weights` does."""
+    if len(coefficients) != len(focals):
+        raise ValueError(
+            f"{len(coefficients)} sequences of coefficients for {len(focals)} focal lengths"
+        )
+    if not coefficients:
+        return ()
     size = len(coefficients[0])
     total = [0.0] * size
     for index, weight in weights(focals, focal):
