@@ -739,3 +739,17 @@ def test_a_utf16_file_is_refitted_and_said_not_patched_for_its_encoding(runner, 
     assert result.exit_code == 0, result.output
     assert [row["status"] for row in rows] == ["not_located"]
     assert "UTF-16 or UTF-32" in rows[0]["message"] and rows[0]["a_new"] != ""
+
+
+def test_the_refits_measures_refuse_what_is_not_a_model_in_one_line():
+    from lensaudit import refit
+
+    with pytest.raises(ValueError, match="unknown model 'acm'"):
+        refit.change_of_distortion("acm", [0.01], [0.0], 1.5)
+    with pytest.raises(ValueError, match="not all finite numbers"):
+        refit.change_of_distortion("ptlens", [math.nan, -0.05, 0.02], [0.0, 0.0, 0.0], 1.5)
+    with pytest.raises(ValueError, match="not all finite numbers"):
+        refit.smallest_slope("poly3", (math.nan,), 1.9, 3.0)
+    for aspect in (0.0, -1.5, math.inf, math.nan):
+        with pytest.raises(ValueError, match="aspect ratio"):
+            refit.change_of_distortion("poly3", [0.01], [0.0], aspect)

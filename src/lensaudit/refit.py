@@ -55,7 +55,13 @@ _SLOPE_DEGREE = {model: max(map(len, terms)) - 2 for model, terms in _TERMS.item
 
 
 def distortion_polynomial(model: str, coefficients: Sequence[float]) -> np.ndarray:
-    """D(r) of a model as polynomial coefficients, lowest power first (Hugin units)."""
+    """D(r) of a model as polynomial coefficients, lowest power first (Hugin units).
+    Raises ``ValueError`` for an unknown model or a coefficient that is not a
+    finite number."""
+    if model not in _TERMS:
+        raise ValueError(f"unknown model {model!r}: not one of {', '.join(_TERMS)}")
+    if not all(math.isfinite(value) for value in coefficients):
+        raise ValueError(f"{model} coefficients {list(coefficients)} are not all finite numbers")
     result = _IDENTITY.copy()
     for value, term in zip(coefficients, _TERMS[model], strict=True):
         result = P.polyadd(result, value * np.asarray(term, dtype=np.float64))
@@ -104,8 +110,12 @@ def change_of_distortion(
     frame; a smaller radius (a circular fisheye's image circle) leaves out
     the rest. The maximum is over radii 0 to that radius, found exactly at
     the end points and the real roots of the difference's derivative; the
-    RMS is over the image's area, every pixel alike.
+    RMS is over the image's area, every pixel alike. Raises ``ValueError``
+    for an aspect ratio that is not a positive number, and as
+    :func:`distortion_polynomial` does.
     """
+    if not (aspect_ratio > 0 and math.isfinite(aspect_ratio)):
+        raise ValueError(f"aspect ratio {aspect_ratio!r} is not a positive number")
     difference = P.polysub(distortion_polynomial(model, new), distortion_polynomial(model, old))
     difference = np.trim_zeros(difference, "b")
     aspect = max(aspect_ratio, 1.0 / aspect_ratio)
