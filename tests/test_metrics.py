@@ -162,3 +162,11 @@ def test_exact_values_beyond_the_largest_double_round_to_infinity():
     assert _nearest_double(Fraction(10) ** 400) == math.inf
     assert _nearest_double(-(Fraction(10) ** 400)) == -math.inf
     assert _nearest_double(Fraction(3, 2)) == 1.5
+
+
+def test_columns_of_another_length_are_refused_and_single_values_stand_for_all():
+    one = metrics.compute("poly3", 0.0, 0.0, 0.0, -0.3, 0.0, 1.5, 1.5, 10.0, True)
+    many = metrics.compute(["poly3"] * 3, 0.0, 0.0, 0.0, [-0.3] * 3, 0.0, 1.5, 1.5, 10.0, True)
+    assert list(many.r_max) == [one.r_max[0]] * 3 and bool(one.folds_in_image[0])
+    with pytest.raises(ValueError, match=r"k1 has shape \(2,\): one value per entry needs \(3,\)"):
+        metrics.compute(["poly3"] * 3, 0, 0, 0, [-0.3, 0.1], 0, 1.5, 1.5, 10.0, True)

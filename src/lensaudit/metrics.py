@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -302,16 +302,35 @@ def compute(
     ``circular`` marks circular fisheyes, judged against their image circle
     (see :func:`image_radius`) rather than the frame's corner.
     """
-    model = np.asarray(model)
-    audited = np.asarray(audited, dtype=bool)
+    model = np.atleast_1d(np.asarray(model))
     size = model.shape[0]
+    if model.ndim != 1:
+        raise ValueError(f"model must be one column of names, not of shape {model.shape}")
+
+    def column(name: str, values: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
+        """A column of one value per entry (a single value standing for all)."""
+        found = np.asarray(values, dtype=dtype)
+        if found.shape not in ((), (1,), (size,)):
+            raise ValueError(f"{name} has shape {found.shape}: one value per entry needs ({size},)")
+        return np.broadcast_to(found, (size,))
+
+    audited = column("audited", audited, bool)
     r_max = np.full(size, np.nan)
     d_max = np.full(size, np.nan)
     tail = np.zeros(size, dtype=np.int8)
     columns = {
-        name: np.asarray(values, dtype=np.float64)
-        for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()
+        name: column(name, values) for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()
     }
+    crop_factor, aspect_ratio, focal = (
+        column(name, values)
+        for name, values in (
+            ("crop_factor", crop_factor),
+            ("aspect_ratio", aspect_ratio),
+            ("focal", focal),
+        )
+    )
+    if circular is not None:
+        circular = column("circular", circular, bool)
     builders = {
         "ptlens": lambda rows: normalizer.ptlens(*(columns[n][rows] for n in "abc")),
         "poly3": lambda rows: normalizer.poly3(columns["k1"][rows]),
