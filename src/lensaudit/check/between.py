@@ -7,7 +7,9 @@ inside it in between. :func:`lensaudit.zooms.between_all` judges every focal
 length of every interval (a proof, not a sample), and each interval that
 folds inside the image, next to two calibrations that do not fold themselves,
 is a ``fold-between-calibrations`` error at the lower calibration's line,
-naming the focal length where it folds and the calibration above. Next to
+naming the focal length where it folds, the calibration above, and the
+other calibrations the spline weighs there (a change to one of those can
+make the fold, away from the finding's line). Next to
 a calibration that folds, the interval's fold is that calibration's
 ``fold-in-image``, and a refit of it (``lensaudit fix`` sweeps the zoom)
 mends both. An interval that cannot be decided is a notice, when asked for.
@@ -65,7 +67,19 @@ def folds_between(
             low, high = (_first_at(found, entries, f) for f in (interval.low, interval.high))
             if folding[low] or folding[high]:
                 continue  # that calibration's own fold-in-image
-            yield low, _finding(entries[low], entries[high], interval, file_names[low])
+            others = [
+                entries[i] for i in _spline_calibrations(found, interval) if i not in (low, high)
+            ]
+            yield low, _finding(entries[low], entries[high], interval, file_names[low], others)
+
+
+def _spline_calibrations(found: zooms.CalibrationSet, interval: zooms.Between) -> list[int]:
+    """The entries (positions in the audit) whose coefficients liblensfun's
+    spline weighs at the interval's focal length where it folds (or its middle)."""
+    from ..interpolation import weights
+
+    focal = interval.focal if interval.focal > 0 else (interval.low + interval.high) / 2
+    return sorted(found.indices[index] for index, weight in weights(found.focals, focal) if weight)
 
 
 def _first_at(found: zooms.CalibrationSet, entries: Sequence[DistortionEntry], focal: float) -> int:
@@ -74,13 +88,21 @@ def _first_at(found: zooms.CalibrationSet, entries: Sequence[DistortionEntry], f
 
 
 def _finding(
-    low: DistortionEntry, high: DistortionEntry, interval: zooms.Between, file_name: str
+    low: DistortionEntry,
+    high: DistortionEntry,
+    interval: zooms.Between,
+    file_name: str,
+    others: Sequence[DistortionEntry] = (),
 ) -> Identified:
     at = f"{interval.focal:.4g} mm"
     between = (
         f"between the calibrations at {interval.low:g} mm (this line) and "
         f"{interval.high:g} mm (line {high.line})"
     )
+    if others:  # the spline weighs its neighbours too: a change to one of them shows here
+        between += ", whose spline there also weighs " + ", ".join(
+            f"{entry.focal:g} mm (line {entry.line})" for entry in others
+        )
     if interval.verdict == zooms.FOLDS:
         severity = SEVERITY_ERROR
         text = (
@@ -92,7 +114,7 @@ def _finding(
         text = f"whether liblensfun's interpolated model folds {between} could not be decided"
     finding = replace(
         entry_finding(severity, FOLD_BETWEEN_CALIBRATIONS, low, text),
-        related=((high.file, high.line),),
+        related=((high.file, high.line), *((entry.file, entry.line) for entry in others)),
     )
     # The pair of calibrations of the lens by name; then the pair alone (a renamed lens).
     pair = (severity, FOLD_BETWEEN_CALIBRATIONS, entry_content(low), entry_content(high))
