@@ -96,25 +96,35 @@ HISTORY_BUNDLE = (
 )
 
 
-@pytest.fixture(scope="session")
-def lensfun_head(tmp_path_factory) -> Path:
-    """data/db at the last commit of Lensfun's history bundle; skips without the bundle."""
+def clone_history(directory: Path, name: str = "lensfun", *options: str) -> Path:
+    """A clone of Lensfun's history bundle, ``directory``/``name`` (git clone
+    ``options``); skips the test without the bundle or git."""
+    import shutil
     import subprocess
 
     if not HISTORY_BUNDLE.is_file():
         pytest.skip(
             f"no Lensfun history bundle at {HISTORY_BUNDLE} (../shared/data from the repository)"
         )
-    clone = tmp_path_factory.mktemp("head") / "lensfun"
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    clone = directory / name
     try:
         subprocess.run(
-            ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)],
+            ["git", "clone", "--quiet", *options, str(HISTORY_BUNDLE), str(clone)],
             check=True,
             capture_output=True,
+            timeout=600,
         )
-    except (OSError, subprocess.CalledProcessError) as error:
+    except (OSError, subprocess.SubprocessError) as error:
         pytest.skip(f"cannot clone the Lensfun history bundle: {error}")
-    return clone / "data" / "db"
+    return clone
+
+
+@pytest.fixture(scope="session")
+def lensfun_head(tmp_path_factory) -> Path:
+    """data/db at the last commit of Lensfun's history bundle; skips without the bundle."""
+    return clone_history(tmp_path_factory.mktemp("head")) / "data" / "db"
 
 
 #: A one-lens database whose poly3 entry folds inside its image (line 10).

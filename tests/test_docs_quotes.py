@@ -8,7 +8,6 @@ from __future__ import annotations
 import csv
 import io
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +15,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from conftest import clone_history
 from lensaudit.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -113,13 +113,8 @@ def test_report_counts_the_files_it_writes(report_runs):
 @pytest.fixture(scope="module")
 def lensfun_history_run(tmp_path_factory) -> tuple[list[str], Path]:
     """`lensaudit history` of the Lensfun bundle's clone: (output lines, output directory)."""
-    if not BUNDLE.is_file():
-        pytest.skip(f"the Lensfun history bundle is not at {BUNDLE}")
-    if shutil.which("git") is None:
-        pytest.skip("git is not installed")
     base = tmp_path_factory.mktemp("lensfun-history")
-    clone = base / "lensfun-db"
-    subprocess.run(["git", "clone", "-q", str(BUNDLE), str(clone)], check=True, timeout=600)
+    clone = clone_history(base, "lensfun-db")
     out = base / "history-out"
     result = CliRunner().invoke(main, ["history", str(clone), "-o", str(out), "--no-cache"])
     assert result.exit_code == 0, result.output
@@ -221,13 +216,7 @@ def test_ci_md_counts_todays_folds(lensfun_history_run):
 @pytest.fixture(scope="module")
 def lensfun_checkout(tmp_path_factory) -> Path:
     """A clone of the Lensfun history bundle to change, as docs/ci.md's examples do."""
-    if not BUNDLE.is_file():
-        pytest.skip(f"the Lensfun history bundle is not at {BUNDLE}")
-    if shutil.which("git") is None:
-        pytest.skip("git is not installed")
-    clone = tmp_path_factory.mktemp("ci-examples") / "lensfun"
-    subprocess.run(["git", "clone", "-q", str(BUNDLE), str(clone)], check=True, timeout=600)
-    return clone
+    return clone_history(tmp_path_factory.mktemp("ci-examples"))
 
 
 def check_in(checkout: Path, baseline: str, change=None) -> tuple[int, list[str]]:

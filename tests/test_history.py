@@ -24,7 +24,7 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
 
-from conftest import FOLDING_LENS, git_repository, no_child_left
+from conftest import FOLDING_LENS, clone_history, git_repository, no_child_left
 from damage import FLIPS, flipped
 from history_blobs import file_versions
 from lensaudit import read
@@ -998,17 +998,7 @@ def test_the_history_command_reads_through_the_one_reader_only(repo, tmp_path):
 @pytest.fixture(scope="session")
 def lensfun_history(tmp_path_factory) -> Path:
     """A clone of the Lensfun database's history, from the shared bundle."""
-    if not BUNDLE.exists():
-        pytest.skip(f"the Lensfun history bundle is not available ({BUNDLE})")
-    if shutil.which("git") is None:
-        pytest.skip("git is not installed")
-    clone = tmp_path_factory.mktemp("lensfun-db") / "lensfun-db"
-    subprocess.run(
-        ["git", "clone", "-q", "--no-checkout", str(BUNDLE), str(clone)],
-        check=True,
-        capture_output=True,
-    )
-    return clone
+    return clone_history(tmp_path_factory.mktemp("lensfun-db"), "lensfun-db", "--no-checkout")
 
 
 def _paper_revision(clone: Path) -> str:
