@@ -282,6 +282,14 @@ def paper_image_corner(crop_factor: ArrayLike, focal: ArrayLike) -> FloatArray:
         return HALF_DIAGONAL_MM / (np.asarray(crop_factor, np.float64) * np.asarray(focal))
 
 
+def _column(name: str, values: ArrayLike, size: int, dtype: type = np.float64) -> NDArray[Any]:
+    """A column of :func:`compute`: one value per entry (a single value standing for all)."""
+    found = np.asarray(values, dtype=dtype)
+    if found.shape not in ((), (1,), (size,)):
+        raise ValueError(f"{name} has shape {found.shape}: one value per entry needs ({size},)")
+    return np.broadcast_to(found, (size,))
+
+
 def compute(
     model: NDArray[np.str_] | list[str],
     a: ArrayLike,
@@ -307,30 +315,16 @@ def compute(
     if model.ndim != 1:
         raise ValueError(f"model must be one column of names, not of shape {model.shape}")
 
-    def column(name: str, values: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
-        """A column of one value per entry (a single value standing for all)."""
-        found = np.asarray(values, dtype=dtype)
-        if found.shape not in ((), (1,), (size,)):
-            raise ValueError(f"{name} has shape {found.shape}: one value per entry needs ({size},)")
-        return np.broadcast_to(found, (size,))
-
-    audited = column("audited", audited, bool)
+    audited = _column("audited", audited, size, bool)
     r_max = np.full(size, np.nan)
     d_max = np.full(size, np.nan)
     tail = np.zeros(size, dtype=np.int8)
+    given = dict(a=a, b=b, c=c, k1=k1, k2=k2, crop_factor=crop_factor, aspect_ratio=aspect_ratio)
     columns = {
-        name: column(name, values) for name, values in dict(a=a, b=b, c=c, k1=k1, k2=k2).items()
+        name: _column(name, values, size) for name, values in dict(given, focal=focal).items()
     }
-    crop_factor, aspect_ratio, focal = (
-        column(name, values)
-        for name, values in (
-            ("crop_factor", crop_factor),
-            ("aspect_ratio", aspect_ratio),
-            ("focal", focal),
-        )
-    )
     if circular is not None:
-        circular = column("circular", circular, bool)
+        circular = _column("circular", circular, size, bool)
     builders = {
         "ptlens": lambda rows: normalizer.ptlens(*(columns[n][rows] for n in "abc")),
         "poly3": lambda rows: normalizer.poly3(columns["k1"][rows]),
@@ -355,8 +349,10 @@ def compute(
                 r_max[row], d_max[row], tail[row] = exact_model_r_max(
                     exact, 1 if name == "ptlens" else 2
                 )
-    r_corner = np.where(audited, image_radius(aspect_ratio, circular), np.nan)
-    r_corner_paper = np.where(audited, paper_image_corner(crop_factor, focal), np.nan)
+    r_corner = np.where(audited, image_radius(columns["aspect_ratio"], circular), np.nan)
+    r_corner_paper = np.where(
+        audited, paper_image_corner(columns["crop_factor"], columns["focal"]), np.nan
+    )
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         r_normalized = d_max / r_corner
         r_normalized_paper = d_max / r_corner_paper
