@@ -297,3 +297,13 @@ def _onset(radius_px: np.ndarray, mask: np.ndarray, run: int = 8) -> tuple[float
         (i for i in failing if mask[i : i + run].all() or i + run > len(mask)), failing[-1]
     )
     return float(radius_px[failing[0]]), float(radius_px[settled])
+
+
+def test_one_entry_given_as_scalars_is_judged_as_a_column_of_one():
+    nan = float("nan")
+    columns = ("ptlens", 0.2, -0.6, 0.9, 0.0, 0.0, 24.0, nan, 1.5, 1.5)
+    scalars = inversion.liblensfun_model(*columns)
+    column = inversion.liblensfun_model(*([value] for value in columns))
+    for radius in (0.5, 1.8):
+        one = inversion.inversion_failures(scalars, [radius])
+        assert list(one.fails) == list(inversion.inversion_failures(column, [radius]).fails)

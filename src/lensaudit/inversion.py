@@ -125,7 +125,7 @@ def liblensfun_model(
     where the entry gives none, in which case liblensfun takes focal * d
     (ptlens, poly3) or focal (libs/lensfun/database.cpp).
     """
-    model = np.asarray(model, dtype=object)
+    model = np.atleast_1d(np.asarray(model, dtype=object))  # one entry may be given as scalars
     kind = np.full(model.shape, -1, dtype=np.int8)
     for index, name in enumerate(_MODELS):
         kind[model == name] = index
@@ -134,6 +134,9 @@ def liblensfun_model(
     )
     focal, crop, aspect = _f32(focal), _f32(crop_factor), _f32(aspect_ratio)
     real_focal = np.asarray(real_focal, dtype=np.float64)
+    a, b, c, k1, k2, focal, crop, aspect, real_focal = (
+        np.broadcast_to(x, kind.shape) for x in (a, b, c, k1, k2, focal, crop, aspect, real_focal)
+    )
     with np.errstate(all="ignore"):
         # float arithmetic, as liblensfun's: 1 - T0 - T1 - T2 in single precision.
         d_ptlens = _f32(_f32(_f32(1.0 - a) - b) - c)
