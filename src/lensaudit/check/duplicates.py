@@ -20,7 +20,7 @@ from dataclasses import replace
 
 from ..read.cache import content_hasher
 from ..read.records import DistortionEntry
-from .matching import entry_content, lens_identity
+from .matching import entry_content, lens_identity, lens_key
 from .parsing import LensRecord, ParsedSource
 from .result import (
     DUPLICATE_FOCAL,
@@ -34,7 +34,6 @@ from .result import (
     entry_finding,
     lens_name,
     none_if_nan,
-    normalized_name,
 )
 
 
@@ -75,11 +74,6 @@ class Known:
             if self._contents[id(file)][index] == content:
                 return True
         return False
-
-
-def lens_key(lens: LensRecord) -> tuple:
-    """A lens as the duplicate rules compare lenses: maker, model and crop factor."""
-    return normalized_name(lens.maker), normalized_name(lens.model), lens.crop_factor
 
 
 def duplicate_focals(

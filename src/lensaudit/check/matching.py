@@ -17,7 +17,7 @@ from .. import read as reader
 from ..read.records import STATUS_OK, DistortionEntry
 from .inputs import last_readable
 from .loading import liblensfun_refusals
-from .parsing import ParsedSource, parse_sources
+from .parsing import LensRecord, ParsedSource, parse_sources
 from .result import (
     BASELINE_UNREADABLE,
     FILE_CODES,
@@ -26,6 +26,7 @@ from .result import (
     Identified,
     clip,
     none_if_nan,
+    normalized_name,
 )
 
 
@@ -176,12 +177,15 @@ def compare(
     return findings, resolved
 
 
+def lens_key(lens: LensRecord) -> tuple:
+    """A lens as the duplicate rules compare lenses: maker, model and crop factor."""
+    return normalized_name(lens.maker), normalized_name(lens.model), lens.crop_factor
+
+
 def lens_names(read: Sequence[ParsedSource]) -> set[Hashable]:
     """The name of every lens of the files, as the findings' keys hold it: by
     :func:`lens_identity`, and as the duplicate rules compare lenses (with
-    their crop factor)."""
-    from .duplicates import lens_key  # duplicates imports this module
-
+    their crop factor, :func:`lens_key`)."""
     names: set[Hashable] = set()
     for file in read:
         for lens in file.lenses:
