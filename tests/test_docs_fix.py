@@ -59,3 +59,32 @@ def test_every_change_the_docs_name_is_in_todays_table(live):
         assert any(abs(float(number) - v) <= (0.05 if "." in number else 0.5) for v in values), (
             number
         )
+
+
+def test_the_options_and_columns_docs_fix_md_lists_are_the_commands():
+    from lensaudit.cli.fix import fix as command
+    from lensaudit.fix import RECORD_COLUMNS
+
+    text = (ROOT / "docs" / "fix.md").read_text()
+    table = text.split("## Options")[1].split("\n\n")[1]
+    options = {param.opts[0]: param for param in command.params if param.opts[0].startswith("-")}
+    for option, default in re.findall(
+        r"^\| `(--[\w-]+)[^|]*\|.*\(default (\S+?)\) \|$", table, re.M
+    ):
+        assert float(options[option].default) == float(default), option
+    listed = {name for name in re.findall(r"`(--[\w-]+)", table)}
+    assert {name for name in options if name.startswith("--")} - {"--help"} <= listed | {
+        "--no-cache"
+    }
+    columns = text.split("CSV and JSON columns:")[1].split("\n\n")[0]
+    named = re.findall(r"`(\w+)`", columns)
+    expanded = [
+        n for n in named if n not in ("fixed", "beyond_tolerance", "no_solution", "not_located")
+    ]
+    old, new = (
+        [f"{c}_old" for c in "a b c k1 k2".split()],
+        [f"{c}_new" for c in "a b c k1 k2".split()],
+    )
+    at = expanded.index("a_old")
+    expanded[at : at + 4] = [*old, *new]  # "a_old ... k2_old, ... a_new ... k2_new"
+    assert expanded == list(RECORD_COLUMNS)

@@ -66,6 +66,21 @@ def test_readme_prose_counts_the_folds_of_the_live_scan(scan_output):
     assert (int(units[1]), int(units[2])) == (folds, paper)
 
 
+def test_readme_command_table_names_each_commands_arguments_as_its_usage_does():
+    import click
+
+    context = click.Context(main)
+    rows = re.findall(r"^\| `lensaudit (\w+)([^`]*)` \|", doc("README.md"), flags=re.M)
+    assert {name for name, _ in rows} == set(main.list_commands(context))
+    for name, words in rows:
+        command = main.get_command(context, name)
+        metavars = [p.metavar for p in command.params if isinstance(p, click.Argument)]
+        # What the row names as arguments: upper-case words not taken by an option.
+        named = re.sub(r"--?[\w-]+ [A-Z]+", "", words.replace("\\|", "|"))
+        for word in re.findall(r"\[?[A-Z]+(?: \.\.\.)?\]?", named):
+            assert word in metavars, (name, word, metavars)
+
+
 # ------------------------------------------------------------ docs/report.md
 
 
@@ -105,6 +120,20 @@ def test_report_counts_the_files_it_writes(report_runs):
     expanded = {n if not n.startswith(".") else "fig5_r_normalized" + n for n in named}
     assert set(written) <= expanded
     assert expanded - set(written) == {"paper_comparison.md"}  # with --paper only
+
+
+def test_report_md_plot_query_excerpts_are_todays_output(bundled_db, tmp_path, monkeypatch):
+    import shlex
+
+    monkeypatch.chdir(tmp_path)  # not in a Lensfun checkout: the bundled database
+    text = doc("docs/report.md")
+    commands = re.findall(r"^\$ (lensaudit plot curve .+)$", text, flags=re.M)
+    assert len(commands) == 2
+    for command, status in zip(commands, (2, 0), strict=True):
+        result = CliRunner().invoke(main, shlex.split(command)[1:])
+        assert result.exit_code == status, result.output
+        live = re.sub(r"\(/\S*lensfunpy/db_files\)", "(.../lensfunpy/db_files)", result.output)
+        assert block_after(text, command) == live.splitlines()
 
 
 # ----------------------------------------------------------- docs/history.md
