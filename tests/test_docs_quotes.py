@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import re
 import subprocess
 import sys
@@ -378,3 +379,50 @@ def test_the_brightening_counts_of_docs_vignetting_md_are_todays(bundled_db, len
     assert tuple(map(int, sentence.groups()[:4])) == (*bundled[:2], *head[:2])
     assert " ".join(sentence[5].split()) == bundled[2] == head[2]
     assert f"{bundled[3]:.2f} times as bright" in " ".join(text.split())
+
+
+# ------------------------------------------------- docs/projection.md, vignetting.md
+
+
+def test_projection_md_says_where_the_plain_polynomial_puts_the_folded_point(bundled_db):
+    from lensaudit.projection import lensfun_camera, project
+    from lensaudit.read import read
+
+    entries = read(bundled_db / "slr-tokina.xml").entries()
+    camera = lensfun_camera(next(e for e in entries if e.line == 17), 6000, 4000)
+    pixels, valid = project([3.732, 0.0, 1.0], camera, nan_for_invalid=False)
+    x, y = (float(v) for v in pixels)
+    low, high = 0.0, camera.max_angle_degrees  # the angle on that ray of the last pixel
+    for _ in range(60):
+        middle = (low + high) / 2
+        at = float(project([math.tan(math.radians(middle)), 0.0, 1.0], camera)[0][0])
+        low, high = (middle, high) if at < 5999.5 else (low, middle)
+    edge = low
+    text = " ".join(doc("docs/projection.md").split())
+    quoted = re.search(
+        r"75 degrees off axis, (\d+) degrees beyond the picture's right edge \(([\d.]+) "
+        r"degrees on that ray\).*?at pixel \(([\d.]+), ([\d.]+)\), inside the image, (\d+) "
+        r"pixels right of its centre",
+        text,
+    )
+    assert quoted and not valid
+    assert (quoted[3], quoted[4]) == (f"{x:.1f}", f"{y:.1f}")
+    assert int(quoted[5]) == round(x - 2999.5) and 0 <= x < 6000
+    assert quoted[2] == f"{edge:.1f}" and int(quoted[1]) == round(75 - edge)
+
+
+def test_vignetting_md_names_the_lowest_correction_and_where_it_reaches_zero(bundled_db):
+    output = CliRunner().invoke(main, ["scan", "--no-cache", "--kind", "vignetting", "-f", "csv"])
+    rows = list(csv.DictReader(io.StringIO(output.output)))
+    lowest = min(rows, key=lambda r: float(r["c_min"]) if r["c_min"] else math.inf)
+    text = " ".join(doc("docs/vignetting.md").split())
+    quoted = re.search(
+        r"the (Canon EF 8-15mm f/4L Fisheye) at (\d+) mm, where C reaches (-?[\d.]+) at the "
+        r"corner and crosses zero at r = ([\d.]+) \(f/([\d.]+)\)",
+        text,
+    )
+    assert quoted
+    assert quoted[1] in lowest["lens"] and float(lowest["focal"]) == float(quoted[2])
+    assert f"{float(lowest['c_min']):.1f}" == quoted[3]
+    assert f"{float(lowest['r_zero']):.2f}" == quoted[4]
+    assert f"{float(lowest['aperture']):g}" == quoted[5]
