@@ -102,8 +102,8 @@ Exit status:
     metavar="DIR_OR_REV",
     default=None,
     help="Only fail on entries that are new or changed since this database: "
-    "an existing directory (or file), else a git revision of the "
-    "repository holding PATH, e.g. origin/master or HEAD.",
+    "an existing directory (a Lensfun checkout meaning its data/db) or file, "
+    "else a git revision of the repository holding PATH, e.g. origin/master or HEAD.",
 )
 @click.option(
     "--margin",
