@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import normalizer
 from .solver import kernel
 from .solver.arrays import min_positive_root
-from .solver.constants import SMALLEST_NORMAL
+from .solver.constants import ROOTS_IN_RANGE, SMALLEST_NORMAL
 
 # Exact arithmetic is imported where it is needed: few inputs ever take that path.
 if TYPE_CHECKING:
@@ -84,21 +84,17 @@ def model_r_max(cubic: normalizer.Cubic) -> tuple[FloatArray, FloatArray, NDArra
     return r_max, d_max, tail
 
 
-#: A Cauchy bound of the cubic's roots up to this leaves none beyond the largest double.
-_ROOTS_IN_RANGE = 2.0**1020
-
-
 def roots_in_range(a: FloatArray, b: FloatArray, c: FloatArray) -> NDArray[np.bool_]:
     """Where 1 + a w + b w^2 + c w^3 certainly changes sign at no w beyond the
     largest double: no coefficient is negative (no positive root at all), or
     Cauchy's bound on the roots, 1 + max |other coefficient / leading one|,
-    stays below :data:`_ROOTS_IN_RANGE`. (Elsewhere a float answer of inf may
-    be a root beyond the largest double.)"""
+    stays below :data:`~lensaudit.solver.constants.ROOTS_IN_RANGE`. (Elsewhere
+    a float answer of inf may be a root beyond the largest double.)"""
     with np.errstate(all="ignore"):
         cubic = np.maximum(np.maximum(abs(1 / c), abs(a / c)), abs(b / c))
         quadratic = np.maximum(abs(1 / b), abs(a / b))
         bound = 1 + np.where(c != 0, cubic, np.where(b != 0, quadratic, abs(1 / a)))
-    return ((a >= 0) & (b >= 0) & (c >= 0)) | (bound <= _ROOTS_IN_RANGE)
+    return ((a >= 0) & (b >= 0) & (c >= 0)) | (bound <= ROOTS_IN_RANGE)
 
 
 def needs_exact(cubic: normalizer.Cubic, r_max: ArrayLike, d_max: ArrayLike) -> NDArray[np.bool_]:
@@ -218,8 +214,8 @@ def _first_turn(normalized: list[Fraction], power: int) -> float:
         turn = -normalized[0] / normalized[1]
         if turn > Fraction(2) ** (k + 1000):
             half = (turn.numerator.bit_length() - turn.denominator.bit_length()) // 2
-            return _ldexp(math.sqrt(float(turn / Fraction(4) ** half)), half)
-    return _ldexp(w, k) if power == 1 else _ldexp(math.sqrt(w), k // 2)
+            return kernel.ldexp(math.sqrt(float(turn / Fraction(4) ** half)), half)
+    return kernel.ldexp(w, k) if power == 1 else kernel.ldexp(math.sqrt(w), k // 2)
 
 
 def _scaled_root(normalized: list[Fraction], k: int) -> tuple[float, int]:
@@ -229,14 +225,6 @@ def _scaled_root(normalized: list[Fraction], k: int) -> tuple[float, int]:
 
     scaled = [_nearest_double(x * Fraction(2) ** (m * k)) for m, x in enumerate(normalized, 1)]
     return float(min_positive_root(*scaled)), k
-
-
-def _ldexp(x: float, exponent: int) -> float:
-    """x * 2^exponent, inf beyond the largest double (math.ldexp raises there)."""
-    try:
-        return math.ldexp(x, exponent)
-    except OverflowError:
-        return math.copysign(math.inf, x)
 
 
 def image_corner(aspect_ratio: ArrayLike) -> FloatArray:

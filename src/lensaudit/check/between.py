@@ -74,12 +74,10 @@ def folds_between(
 
 
 def _spline_calibrations(found: zooms.CalibrationSet, interval: zooms.Between) -> list[int]:
-    """The entries (positions in the audit) whose coefficients liblensfun's
-    spline weighs at the interval's focal length where it folds (or its middle)."""
-    from ..interpolation import weights
-
+    """The entries (positions in the audit) liblensfun's spline interpolates
+    from at the interval's focal length where it folds (or its middle)."""
     focal = interval.focal if interval.focal > 0 else (interval.low + interval.high) / 2
-    return sorted(found.indices[index] for index, weight in weights(found.focals, focal) if weight)
+    return sorted(found.indices[position] for position in zooms.neighbours(found, focal))
 
 
 def _first_at(found: zooms.CalibrationSet, entries: Sequence[DistortionEntry], focal: float) -> int:

@@ -26,5 +26,8 @@ SAFE_SCALED = 2.0**-250
 HALF_WIDTH = 2.0**-44
 #: Exponent given to a missing (zero) term, so that it is never the largest.
 ABSENT = -(1 << 20)
+#: A Cauchy bound of a cubic's roots up to this leaves none beyond the largest
+#: double (metrics.roots_in_range, and the kernel's).
+ROOTS_IN_RANGE = 2.0**1020
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
 HALF_DIAGONAL_MM = math.hypot(18.0, 12.0)

@@ -32,6 +32,7 @@ from .constants import HALF_DIAGONAL_MM
 from .constants import HALF_WIDTH as _HALF_WIDTH
 from .constants import MAX as _MAX
 from .constants import PLAIN_NEWTON_STEPS as _PLAIN_NEWTON_STEPS
+from .constants import ROOTS_IN_RANGE as _ROOTS_IN_RANGE
 from .constants import SAFE_SCALED as _SAFE_SCALED
 from .constants import SMALLEST_NORMAL as _SMALLEST_NORMAL
 from .constants import SPLITTER as _SPLITTER
@@ -52,8 +53,9 @@ _frexp = math.frexp
 _copysign = math.copysign
 
 
-def _ldexp(x: float, exponent: int) -> float:
-    """numpy.ldexp: infinite on overflow rather than an error."""
+def ldexp(x: float, exponent: int) -> float:
+    """x * 2^exponent as numpy.ldexp gives it: infinite on overflow rather than
+    math.ldexp's error."""
     try:
         return math.ldexp(x, exponent)
     except OverflowError:
@@ -123,7 +125,7 @@ def _cube_root_above(y: float) -> float:
     """solver._cube_root_above of one finite y >= 0."""
     if not y > 0:
         return y
-    z = _ldexp(1.0, -((-_frexp(y)[1]) // 3))
+    z = ldexp(1.0, -((-_frexp(y)[1]) // 3))
     for _ in range(2):
         z = (2 * z + y / (z * z)) / 3
     return z
@@ -277,12 +279,10 @@ def _certified(x: float, A: float, B: float, C: float, t: int) -> float | None:
     no_critical = A * A - 3 * B < -3 * _EPS * (A * A + 3 * abs(B))
     if not (convex or no_critical):
         return None
-    if not (
-        _ldexp(1 / hi, t) >= 2 * _SMALLEST_NORMAL and _ldexp(1 / lo, t) <= _MAX * (1 - 8 * _EPS)
-    ):
+    if not (ldexp(1 / hi, t) >= 2 * _SMALLEST_NORMAL and ldexp(1 / lo, t) <= _MAX * (1 - 8 * _EPS)):
         return None
     if _q_sign(hi, A, B, C) > 0 and _q_sign(lo, A, B, C) < 0:
-        return _ldexp(1 / x, t)
+        return ldexp(1 / x, t)
     return None
 
 
@@ -333,10 +333,6 @@ def _roots_in_range(a: float, b: float, c: float) -> bool:
     else:
         bound = abs(_divide(1.0, a))
     return 1 + bound <= _ROOTS_IN_RANGE
-
-
-#: metrics._ROOTS_IN_RANGE.
-_ROOTS_IN_RANGE = 2.0**1020
 
 
 def is_circular_fisheye(lens: str, lens_type: str) -> bool:
