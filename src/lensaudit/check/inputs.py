@@ -90,6 +90,51 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
     return sources
 
 
+def baseline_label(
+    baseline: str | bytes | os.PathLike[str], paths: Sequence[str | os.PathLike[str]]
+) -> str:
+    """``baseline`` as text, refused with a :class:`CheckError` where it cannot
+    tell what a change adds: empty or blank (what ``--baseline "$BASE"`` gives
+    with BASE unset, which would be read as the working directory), or a
+    directory or file on disk holding one of the files checked, by any name
+    (a link, ``.``, the checkout whose data/db is checked, a hard link), whose
+    findings would all be known. A git revision is never the files on disk.
+    """
+    label = os.fsdecode(baseline)
+    if not label.strip():
+        raise CheckError(
+            f"--baseline {label!r} is blank (an unset variable?): give a git revision "
+            "such as origin/master or HEAD, or a directory of the database before the change"
+        )
+    given = Path(label)
+    if not given.exists():
+        return label
+    try:
+        before = _identities(expand([database_directory(given) if given.is_dir() else given]))
+        same = before & _identities(expand(paths))
+    except LoadError:
+        return label  # reading the baseline says what is wrong with it
+    if same:
+        raise CheckError(
+            f"--baseline {display_path(label)} holds the very files checked, so every "
+            "finding would be known: give a git revision such as HEAD or origin/master, "
+            "or a copy of the database before the change"
+        )
+    return label
+
+
+def _identities(files: Iterable[tuple[Path, str]]) -> set[tuple[int, int]]:
+    """(device, inode) of each file that exists: the same file by any path."""
+    found = set()
+    for path, _ in files:
+        try:
+            info = os.stat(path)
+        except OSError:
+            continue
+        found.add((info.st_dev, info.st_ino))
+    return found
+
+
 def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> list[Source]:
     """The baseline's files: ``baseline`` itself if it exists on disk (a
     Lensfun checkout meaning its ``data/db``), else the same ``paths`` at git

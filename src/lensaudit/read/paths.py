@@ -99,7 +99,8 @@ def resolve(paths: Paths) -> DatabaseSource:
     A path may be ``str``, ``bytes`` or ``os.PathLike``. Raises
     :class:`LoadError` for an empty sequence of paths (reading the default
     database instead would hide a filter that left nothing) and for a path
-    holding a NUL character; ``TypeError`` for what is not a path.
+    holding a NUL character or empty (or blank: ``Path("")`` would be the
+    working directory); ``TypeError`` for what is not a path.
     """
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
@@ -126,8 +127,12 @@ def resolve(paths: Paths) -> DatabaseSource:
 
 def _path(given: str | bytes | os.PathLike) -> Path:
     """One path given, as a Path (bytes decoded as the file system does)."""
-    path = Path(os.fsdecode(given))
-    if "\0" in str(path):
+    text = os.fsdecode(given)
+    if not text.strip():
+        # Path("") is the working directory: an unset variable would read whatever is there.
+        raise LoadError(f"{text!r}: an empty or blank path names no database (give a path)")
+    path = Path(text)
+    if "\0" in text:
         raise LoadError(f"{display_path(path)}: a path cannot hold a NUL character")
     return path
 
@@ -252,14 +257,14 @@ def expand(paths: Paths) -> list[tuple[Path, str]]:
     Directory entries are named relative to the directory given; files given
     directly keep the path as given. Paths are resolved where they can be: a
     link that leads nowhere keeps its own path, to be reported when it is
-    read. Raises :class:`LoadError` when a path does not exist or a
-    directory holds no XML.
+    read. Raises :class:`LoadError` when a path does not exist, is empty or
+    a directory holds no XML.
     """
-    if isinstance(paths, (str, os.PathLike)):
+    if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
     targets: list[tuple[Path, str]] = []
     seen: set[str] = set()
-    for given in map(Path, paths or ()):
+    for given in map(_path, paths or ()):
         for real, name in _files_of(given):
             # The same file named twice (db and db/x.xml, or a link) is read once.
             if real not in seen:
