@@ -35,7 +35,8 @@ EXIT_FINDINGS = 1
 #: The help of `lensaudit check`: what it reports and its exit status.
 CHECK_HELP = """Fail when a Lensfun database, or a change to it, has models that fold.
 
-PATH is a database directory (every *.xml in it), a Lensfun checkout
+PATH is a database directory (the files liblensfun reads there: every
+*.xml, also in subdirectories named *.xml), a Lensfun checkout
 (its data/db) or XML files. Without PATH: the database of the Lensfun
 checkout around the working directory, else the one bundled with
 lensfunpy.
