@@ -70,6 +70,7 @@ from lensaudit.check.result import (  # noqa: E402
     SEVERITY_WARNING,
     Finding,
 )
+from lensaudit.read.paths import loaded_name  # noqa: E402
 from lensaudit.read.tables import SPECS, TCA, VIGNETTING  # noqa: E402
 
 DB_DIR = "data/db"
@@ -208,7 +209,7 @@ def changes(repository: Path, cache, since: str | None = None) -> Iterator[Chang
             for path in git(
                 repository, "diff", "--name-only", parent, commit, "--", DB_DIR
             ).splitlines()  # fmt: skip
-            if path.lower().endswith(".xml") and str(Path(path).parent) == DB_DIR
+            if loaded_name(Path(path).name) and str(Path(path).parent) == DB_DIR
         )
         if not names:
             continue
@@ -228,7 +229,7 @@ def changes(repository: Path, cache, since: str | None = None) -> Iterator[Chang
 def whole_database(repository: Path, revision: str, cache) -> list[ParsedSource]:
     """Every ``*.xml`` of the database directory at ``revision``, parsed."""
     listing = git(repository, "ls-tree", "--name-only", f"{revision}:{DB_DIR}").split()
-    names = [name for name in listing if name.lower().endswith(".xml")]
+    names = [name for name in listing if loaded_name(name)]
     return read_files(repository, revision, sorted(names), cache)
 
 

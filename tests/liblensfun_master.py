@@ -10,6 +10,8 @@ in ``../shared/data`` beside the repository), built once per machine:
 - :func:`load_verdict` -- whether liblensfun loads one file's content, and its error
   code's name (:func:`load_result` adds the parse warning liblensfun prints);
 - :func:`lenses` -- every lens liblensfun holds after loading one file, as dicts;
+- :func:`directory_lenses` -- (maker, model) of every lens liblensfun loads from a
+  directory, as ``lf_db_load_path`` walks it;
 - :func:`interpolate_distortion` -- liblensfun's distortion model at a crop factor
   and focal length, for one of those lenses.
 
@@ -240,6 +242,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.lf_db_destroy.argtypes, lib.lf_db_destroy.restype = [vp], None
     lib.lf_db_load_str.argtypes = [vp, ctypes.c_char_p, ctypes.c_size_t]
     lib.lf_db_load_str.restype = ctypes.c_int
+    lib.lf_db_load_path.argtypes, lib.lf_db_load_path.restype = [vp, ctypes.c_char_p], ctypes.c_int
     lib.lf_db_get_lenses.argtypes = [vp]
     lib.lf_db_get_lenses.restype = ctypes.POINTER(ctypes.POINTER(Lens))
     lib.lf_lens_get_mount_names.argtypes = [ctypes.POINTER(Lens)]
@@ -442,3 +445,25 @@ def interpolate_distortion(
         if not lib.lf_lens_interpolate_distortion(pointer, crop, focal, ctypes.byref(found)):
             return None
         return _model_name(found.Model), tuple(float(term) for term in found.Terms)
+
+
+def directory_lenses(path: str | os.PathLike[str]) -> list[tuple[str, str]]:
+    """(maker, model) of every lens liblensfun holds after ``lf_db_load_path``
+    of a directory (or file), in its order, repeats kept: what liblensfun
+    reads from a database directory, its subdirectories and links included.
+    Files it cannot load are skipped, as liblensfun ignores them."""
+    lib = library()
+    db = lib.lf_db_create()
+    if not db:
+        raise MemoryError("lf_db_create returned NULL")
+    try:
+        with _stderr_captured():
+            lib.lf_db_load_path(db, os.fsencode(path))
+        found = []
+        for pointer in _null_terminated(lib.lf_db_get_lenses(db)):
+            maker, _ = _mlstr(pointer.contents.Maker)
+            model, _ = _mlstr(pointer.contents.Model)
+            found.append((maker, model))
+        return found
+    finally:
+        lib.lf_db_destroy(db)

@@ -1138,24 +1138,26 @@ def test_history_in_worker_processes_writes_the_same_files(lensfun_history, tmp_
 
 
 @pytest.mark.skipif(not hasattr(os, "symlink"), reason="no symbolic links here")
-def test_only_the_xml_files_directly_in_the_database_are_versions(tmp_path):
+def test_the_versions_are_the_files_liblensfun_reads_in_the_database(tmp_path):
     other = FOLDING_LENS.replace("Test 10mm", "Other 10mm")
     repository = git_repository(
         tmp_path / "repo",
         {
             "data/db/a.xml": FOLDING_LENS,
-            "data/db/B.XML": other,
+            "data/db/B.XML": other.replace("Other", "Upper"),  # liblensfun: "*.xml" only
             "data/db/notes.txt": other,
             "data/db/sub/c.xml": other.replace("Other", "Sub"),
+            "data/db/more.xml/d.xml": other,  # a directory named *.xml is read
         },
     )
     os.symlink("a.xml", repository / "data" / "db" / "link.xml")
     _git(repository, "add", "-A")
     _git(repository, "commit", "-qm", "a link")
     result = audit_history(repository)
-    assert result.blobs == 2  # a.xml and B.XML, read once each
+    assert result.blobs == 2  # a.xml and more.xml/d.xml, read once each
     lenses = {entry.entry.lens for entry in result.introduced}
     assert lenses == {"Test 10mm", "Other 10mm"}
+    assert {entry.entry.file for entry in result.introduced} == {"a.xml", "more.xml/d.xml"}
     # The link changes no database file: its commit is no revision of it.
     assert result.commits == 2 and [r.counts["audited"] for r in result.revisions] == [2]
 

@@ -100,9 +100,15 @@ def scan_arguments(words: list[str]) -> ScanArguments | None:
     found = ScanArguments(tuple(paths), **settings)  # type: ignore[arg-type]
     if found.output_format not in FORMAT_NAMES or found.kind not in KIND_NAMES:
         return None
-    if found.output is not None and (not found.output or os.path.isdir(found.output)):
+    if any(
+        not path.strip()
+        for path in (*found.paths, found.output, found.cache_dir)
+        if path is not None
+    ):
+        return None  # click's own message: an empty path is no working directory
+    if found.output is not None and os.path.isdir(found.output):
         return None  # click's own message says what is wrong with it
-    if found.cache_dir is not None and (not found.cache_dir or os.path.isfile(found.cache_dir)):
+    if found.cache_dir is not None and os.path.isfile(found.cache_dir):
         return None
     return found
 

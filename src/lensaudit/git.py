@@ -101,13 +101,23 @@ def resolve_commit(repository: str | os.PathLike[str], revision: str) -> str:
 
 
 def list_tree(
-    repository: str | os.PathLike[str], commit: str, paths: Sequence[str] = ()
+    repository: str | os.PathLike[str],
+    commit: str,
+    paths: Sequence[str] = (),
+    recursive: bool = False,
 ) -> list[TreeEntry]:
     """The entries of ``commit``'s tree under ``paths`` (relative to the top
     of the repository; a directory is listed with a trailing ``/``, the whole
-    tree's top level without paths)."""
+    tree's top level without paths); with ``recursive``, the files in their
+    subdirectories too, and not the subdirectories themselves."""
     listing = run(
-        repository, "ls-tree", "-z", "--full-tree", commit, *(["--", *paths] if paths else [])
+        repository,
+        "ls-tree",
+        "-z",
+        "--full-tree",
+        *(["-r"] if recursive else []),
+        commit,
+        *(["--", *paths] if paths else []),
     )
     entries = []
     for record in listing.split(b"\0"):

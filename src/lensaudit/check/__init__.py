@@ -94,6 +94,7 @@ from .inputs import (
     HISTORY_DEPTH,
     GitOrigin,
     Source,
+    baseline_label,
     baseline_sources,
     sources_from_git,
     sources_from_paths,
@@ -204,6 +205,7 @@ __all__ = [
     "Identified",
     "Source",
     "analyse",
+    "baseline_label",
     "baseline_sources",
     "check",
     "describe",
@@ -225,12 +227,13 @@ def check(
     checkout means its ``data/db``; None: the checkout around the working
     directory, else the database bundled with lensfunpy.
 
-    ``baseline``
-    is an existing directory or file, or else a git revision of the
-    repository holding the paths. ``margin`` (>= 1) is the r_normalized
-    below which a fold outside the image is a warning; ``verbose`` adds the
-    notices about folds. With ``cache``, the reader's tables of files with
-    the same bytes as in an earlier run are reused, and those read now kept
+    ``baseline`` is an existing directory or file, or else a git revision
+    of the repository holding the paths; it is refused (:class:`CheckError`)
+    when empty or blank, and when on disk it holds any of the files checked.
+    ``margin`` (>= 1) is the r_normalized below which a fold outside the
+    image is a warning; ``verbose`` adds the notices about folds. With
+    ``cache``, the reader's tables of files with the same bytes as in an
+    earlier run are reused, and those read now kept
     (:class:`lensaudit.read.Cache`); the result is the same either way.
     Raises :class:`lensaudit.read.LoadError` (:class:`CheckError` included)
     when the input or the baseline cannot be read at all.
@@ -240,6 +243,8 @@ def check(
     # resolve() maps a Lensfun checkout to its data/db (read.paths.database_directory),
     # for the baseline too, which is read at the same paths.
     source = reader.resolve(paths)
+    if baseline is not None:  # refused before any file is read
+        baseline = baseline_label(baseline, source.paths)
     sources = sources_from_paths(source.paths)
     if all(s.data is None for s in sources):
         raise CheckError(

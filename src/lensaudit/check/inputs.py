@@ -17,7 +17,14 @@ from pathlib import Path
 
 from .. import git as gitlayer
 from .. import read as reader
-from ..read.paths import database_directory, display_path, expand, read_file, reason
+from ..read.paths import (
+    database_directory,
+    display_path,
+    expand,
+    loaded_name,
+    read_file,
+    reason,
+)
 from ..read.records import STATUS_OK, LoadError
 from .result import CheckError
 
@@ -63,8 +70,9 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
     """The XML files that directories and files designate, read into memory.
 
     The files are those ``lensaudit scan`` reads (:func:`lensaudit.read.paths.expand`):
-    ``*.xml`` directly inside a directory, named relative to it and shown
-    under the directory as given, and files given directly, named as given.
+    in a directory, those liblensfun reads there (``*.xml``, and the files of
+    subdirectories so named), named relative to it and shown under the
+    directory as given; and files given directly, named as given.
     Raises :class:`CheckError` for a path that does not exist, is neither a
     file nor a directory, or is a directory without XML files; a file that
     cannot be read becomes a :class:`Source` without data.
@@ -88,6 +96,51 @@ def sources_from_paths(paths: Iterable[str | os.PathLike[str]]) -> list[Source]:
                 data, error = None, f"cannot read file: {reason(os_error)}"
             sources.append(Source(name, display, path, data, error))
     return sources
+
+
+def baseline_label(
+    baseline: str | bytes | os.PathLike[str], paths: Sequence[str | os.PathLike[str]]
+) -> str:
+    """``baseline`` as text, refused with a :class:`CheckError` where it cannot
+    tell what a change adds: empty or blank (what ``--baseline "$BASE"`` gives
+    with BASE unset, which would be read as the working directory), or a
+    directory or file on disk holding one of the files checked, by any name
+    (a link, ``.``, the checkout whose data/db is checked, a hard link), whose
+    findings would all be known. A git revision is never the files on disk.
+    """
+    label = os.fsdecode(baseline)
+    if not label.strip():
+        raise CheckError(
+            f"--baseline {label!r} is blank (an unset variable?): give a git revision "
+            "such as origin/master or HEAD, or a directory of the database before the change"
+        )
+    given = Path(label)
+    if not given.exists():
+        return label
+    try:
+        before = _identities(expand([database_directory(given) if given.is_dir() else given]))
+        same = before & _identities(expand(paths))
+    except LoadError:
+        return label  # reading the baseline says what is wrong with it
+    if same:
+        raise CheckError(
+            f"--baseline {display_path(label)} holds the very files checked, so every "
+            "finding would be known: give a git revision such as HEAD or origin/master, "
+            "or a copy of the database before the change"
+        )
+    return label
+
+
+def _identities(files: Iterable[tuple[Path, str]]) -> set[tuple[int, int]]:
+    """(device, inode) of each file that exists: the same file by any path."""
+    found = set()
+    for path, _ in files:
+        try:
+            info = os.stat(path)
+        except OSError:
+            continue
+        found.add((info.st_dev, info.st_ino))
+    return found
 
 
 def baseline_sources(baseline: str, paths: Sequence[str | os.PathLike[str]]) -> list[Source]:
@@ -114,7 +167,9 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
 
     Read with ``git ls-tree`` and ``git cat-file --batch`` from the
     repository holding each path, without touching its work tree or index.
-    A path that did not exist at that revision contributes no file.
+    In a directory, the files liblensfun reads there, as on disk; symbolic
+    links are not followed. A path that did not exist at that revision
+    contributes no file.
     """
     sources: list[Source] = []
     for given in map(Path, paths):
@@ -139,18 +194,18 @@ def sources_from_git(paths: Sequence[str | os.PathLike[str]], revision: str) -> 
         else:
             spec = [relative]
         try:
-            listing = _git_call(gitlayer.list_tree, top, commit, spec)
+            listing = _git_call(gitlayer.list_tree, top, commit, spec, given.is_dir())
         except gitlayer.GitError as error:
             raise CheckError(f"--baseline {revision}: cannot list {given}: {error}") from None
         blobs = []
         for item in listing:
             if item.type != "blob" or item.mode not in ("100644", "100755"):
                 continue
-            filename = item.path.rsplit("/", 1)[-1]
-            if given.is_dir() and not filename.lower().endswith(".xml"):
+            # In a directory, what liblensfun reads there: names relative to it.
+            name = item.path[len(spec[0]) :] if spec else item.path
+            if given.is_dir() and not all(map(loaded_name, name.split("/"))):
                 continue
-            name = filename if given.is_dir() else str(given)
-            blobs.append((name, item.oid, item.path))
+            blobs.append((name if given.is_dir() else str(given), item.oid, item.path))
         blobs.sort()
         try:
             contents = _cat_file([oid.encode() for _, oid, _ in blobs], top)

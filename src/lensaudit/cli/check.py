@@ -35,7 +35,8 @@ EXIT_FINDINGS = 1
 #: The help of `lensaudit check`: what it reports and its exit status.
 CHECK_HELP = """Fail when a Lensfun database, or a change to it, has models that fold.
 
-PATH is a database directory (every *.xml in it), a Lensfun checkout
+PATH is a database directory (the files liblensfun reads there: every
+*.xml, also in subdirectories named *.xml), a Lensfun checkout
 (its data/db) or XML files. Without PATH: the database of the Lensfun
 checkout around the working directory, else the one bundled with
 lensfunpy.
@@ -82,6 +83,9 @@ are matched by content (lens name ignoring case and white space, and the
 entry's own values), never by line. A git revision is read with git
 ls-tree and git cat-file; the work tree is not touched. A baseline file
 that cannot be parsed is replaced by its last version in git that can.
+An empty or blank --baseline (an unset variable) is bad usage, and so is
+a directory or file that holds the files checked, by any name: every
+finding would be known. HEAD is the baseline of uncommitted work.
 
 With --cache (the default), a file whose bytes an earlier check, report
 or `scan --kind` read whole (the baseline's files too) is not parsed
@@ -103,7 +107,8 @@ Exit status:
     default=None,
     help="Only fail on entries that are new or changed since this database: "
     "an existing directory (a Lensfun checkout meaning its data/db) or file, "
-    "else a git revision of the repository holding PATH, e.g. origin/master or HEAD.",
+    "else a git revision of the repository holding PATH, e.g. origin/master or HEAD. "
+    "Refused when empty or blank, and when on disk it holds the files checked.",
 )
 @click.option(
     "--margin",

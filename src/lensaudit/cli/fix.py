@@ -119,7 +119,8 @@ def fix(
     counts as fixed when the largest change is within --tolerance; the others
     are reported with the reason.
 
-    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    PATH is a database directory (the files liblensfun reads there: every
+    *.xml, also in subdirectories named *.xml), a Lensfun checkout
     (its data/db) or XML files. Without PATH: the database of the Lensfun
     checkout around the working directory, else the one bundled with
     lensfunpy. The

@@ -16,16 +16,17 @@ from ..history.index import caches, key_of
 from ..read import parallel
 from ..read.paths import display_path, enclosing_database
 from ..writing import OutputSet
-from .options import ProgressBar, cache_option, fail
+from .options import GivenPath, ProgressBar, cache_option, fail, not_blank
 
 
 @click.command()
-@click.argument("repository", metavar="[REPO]", required=False, type=click.Path(path_type=Path))
+@click.argument("repository", metavar="[REPO]", required=False, type=GivenPath(path_type=Path))
 @click.option(
     "--path",
     "db_path",
     default="data/db",
     show_default=True,
+    callback=not_blank,
     help="Database directory (or XML file) inside REPO, relative to its root.",
 )
 @click.option(
@@ -58,7 +59,7 @@ from .options import ProgressBar, cache_option, fail
     "output_dir",
     required=True,
     metavar="DIR",
-    type=click.Path(path_type=Path, file_okay=False),
+    type=GivenPath(path_type=Path, file_okay=False),
     help="Directory for history.csv, introduced.csv, events.csv, trend.png and trend.svg.",
 )
 @cache_option

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -21,6 +22,7 @@ from ..commands import (
 
 __all__ = [
     "EXIT_INPUT_ERROR",
+    "GivenPath",
     "ProgressBar",
     "FORMAT_NAMES",
     "cache_option",
@@ -29,8 +31,36 @@ __all__ = [
     "format_option",
     "output_file",
     "output_stream",
+    "not_blank",
     "refuse_writing_inputs",
 ]
+
+
+def blank(value: object) -> bool:
+    """Whether a value given for a path is empty or only white space: what
+    ``"$VAR"`` gives when VAR is unset, which a path would read as the working
+    directory."""
+    return isinstance(value, (str, bytes)) and not os.fsdecode(value).strip()
+
+
+class GivenPath(click.Path):
+    """``click.Path`` that refuses an empty or blank value in one line, rather
+    than reading it as the working directory."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if blank(value):
+            self.fail(
+                f"{value!r} is blank (an unset variable?): give a path, . for here", param, ctx
+            )
+        return super().convert(value, param, ctx)
+
+
+def not_blank(context: click.Context, parameter: click.Parameter, value: Any) -> Any:
+    """A click callback refusing an empty or blank value of an option that
+    names something to read."""
+    if blank(value):
+        raise click.BadParameter(f"{value!r} is blank (an unset variable?): give a value")
+    return value
 
 
 def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -39,7 +69,7 @@ def database_paths(function: Callable[..., Any]) -> Callable[..., Any]:
         "paths",
         nargs=-1,
         metavar="[PATH ...]",
-        type=click.Path(path_type=Path, exists=False),
+        type=GivenPath(path_type=Path, exists=False),
     )(function)
 
 
@@ -48,7 +78,7 @@ def output_file(function: Callable[..., Any]) -> Callable[..., Any]:
     return click.option(
         "-o",
         "--output",
-        type=click.Path(path_type=Path, dir_okay=False, allow_dash=True),
+        type=GivenPath(path_type=Path, dir_okay=False, allow_dash=True),
         default=None,
         help="Write to FILE instead of standard output.",
     )(function)
@@ -75,7 +105,7 @@ def cache_option(function: Callable[..., Any]) -> Callable[..., Any]:
     function = click.option(
         "--cache-dir",
         metavar="DIR",
-        type=click.Path(path_type=Path, file_okay=False),
+        type=GivenPath(path_type=Path, file_okay=False),
         default=None,
         expose_value=False,
         callback=_use_cache_dir,

@@ -12,7 +12,7 @@ import click
 from ..pipeline import run
 from ..read import LoadError
 from ..writing import OutputSet
-from .options import EXIT_INPUT_ERROR, cache_option, fail, refuse_writing_inputs
+from .options import EXIT_INPUT_ERROR, GivenPath, cache_option, fail, refuse_writing_inputs
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -26,7 +26,7 @@ def _output(function: Callable[..., Any]) -> Callable[..., Any]:
         "--output",
         required=True,
         metavar="FILE",
-        type=click.Path(path_type=Path, dir_okay=False),
+        type=GivenPath(path_type=Path, dir_okay=False),
         help="Image to write: .png, .svg or .pdf.",
     )(function)
 
@@ -47,7 +47,7 @@ def _entry_options(function: Callable[..., Any]) -> Callable[..., Any]:
             "databases",
             multiple=True,
             metavar="PATH",
-            type=click.Path(path_type=Path),
+            type=GivenPath(path_type=Path),
             help="Database directory or XML file (repeatable) [default: the "
             "database of the Lensfun checkout around the working directory, else the one "
             "bundled with lensfunpy].",

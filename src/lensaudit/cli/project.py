@@ -20,7 +20,7 @@ from .. import read
 from ..formats.csv_format import write_rows
 from ..read import LoadError, display_path
 from ..read.records import STATUS_OK
-from .options import fail, output_file, output_stream, refuse_writing_inputs
+from .options import GivenPath, fail, output_file, output_stream, refuse_writing_inputs
 
 if TYPE_CHECKING:
     import numpy as np
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     required=False,
     metavar="[POINTS]",
     # Checked when read: click's own checks would give a multi-line usage error.
-    type=click.Path(path_type=Path, allow_dash=True, readable=False),
+    type=GivenPath(path_type=Path, allow_dash=True, readable=False),
 )
 @click.option(
     "--entry", metavar="FILE:LINE", help="The <distortion> element at LINE of a Lensfun XML file."
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     "databases",
     multiple=True,
     metavar="PATH",
-    type=click.Path(path_type=Path),
+    type=GivenPath(path_type=Path),
     help="Database directory or XML file for --lens and --entry [default: the "
     "database of the Lensfun checkout around the working directory, else the one "
     "bundled with lensfunpy].",

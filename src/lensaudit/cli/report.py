@@ -10,7 +10,7 @@ from ..commands import cycle_collector_off
 from ..read import LoadError
 from ..report import ReportExistsError, audit, drawing, write_report
 from ..report.writer import planned_files
-from .options import cache_option, database_paths, fail, refuse_writing_inputs
+from .options import GivenPath, cache_option, database_paths, fail, refuse_writing_inputs
 
 
 @click.command()
@@ -21,7 +21,7 @@ from .options import cache_option, database_paths, fail, refuse_writing_inputs
     "output_dir",
     required=True,
     metavar="DIR",
-    type=click.Path(path_type=Path),
+    type=GivenPath(path_type=Path),
     help="Directory to write the report into (created if needed).",
 )
 @click.option("--force", is_flag=True, help="Replace report files already in DIR.")
@@ -37,7 +37,8 @@ def report(
 ) -> None:
     """Write tables, figures and a self-contained HTML report into DIR.
 
-    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    PATH is a database directory (the files liblensfun reads there: every
+    *.xml, also in subdirectories named *.xml), a Lensfun checkout
     (its data/db) or XML files. Without PATH: the database of the Lensfun
     checkout around the working directory, else the one bundled with
     lensfunpy.

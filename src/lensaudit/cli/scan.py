@@ -30,7 +30,8 @@ def scan(
 ) -> None:
     """Compute r_max for every distortion entry of a Lensfun database.
 
-    PATH is a database directory (every *.xml in it), a Lensfun checkout
+    PATH is a database directory (the files liblensfun reads there: every
+    *.xml, also in subdirectories named *.xml), a Lensfun checkout
     (its data/db) or XML files. Without PATH: the database of the Lensfun
     checkout around the working directory, else the one bundled with
     lensfunpy. --kind vignetting or tca audits those models instead

@@ -47,6 +47,8 @@ class Git:
     :class:`HistoryError`."""
 
     def __init__(self, repository: str | os.PathLike[str]) -> None:
+        if not os.fsdecode(repository).strip():  # Path("") would be the working directory
+            raise HistoryError(f"{os.fsdecode(repository)!r}: an empty or blank path: give REPO")
         self.repository = Path(repository)
         self.given = repository  # as the user wrote it, for messages
         if not self.repository.is_dir():
@@ -111,7 +113,9 @@ class Git:
 
 def normalized_path(path: str) -> str:
     """``path`` inside the repository in git's form (``a/b``); HistoryError if it
-    leaves the repository."""
+    leaves the repository or is empty or blank (``.`` is the root)."""
+    if not path.strip():
+        raise HistoryError(f"{path!r}: an empty or blank database path: give one, . for the root")
     parts = [p for p in PurePosixPath(path.replace("\\", "/")).parts if p not in ("", ".")]
     if ".." in parts or any("\n" in p for p in parts) or path.startswith("/"):
         raise HistoryError(f"{path!r}: give the database path relative to the repository root")

@@ -99,7 +99,8 @@ def resolve(paths: Paths) -> DatabaseSource:
     A path may be ``str``, ``bytes`` or ``os.PathLike``. Raises
     :class:`LoadError` for an empty sequence of paths (reading the default
     database instead would hide a filter that left nothing) and for a path
-    holding a NUL character; ``TypeError`` for what is not a path.
+    holding a NUL character or empty (or blank: ``Path("")`` would be the
+    working directory); ``TypeError`` for what is not a path.
     """
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
@@ -126,8 +127,12 @@ def resolve(paths: Paths) -> DatabaseSource:
 
 def _path(given: str | bytes | os.PathLike) -> Path:
     """One path given, as a Path (bytes decoded as the file system does)."""
-    path = Path(os.fsdecode(given))
-    if "\0" in str(path):
+    text = os.fsdecode(given)
+    if not text.strip():
+        # Path("") is the working directory: an unset variable would read whatever is there.
+        raise LoadError(f"{text!r}: an empty or blank path names no database (give a path)")
+    path = Path(text)
+    if "\0" in text:
         raise LoadError(f"{display_path(path)}: a path cannot hold a NUL character")
     return path
 
@@ -142,9 +147,10 @@ def _unique(paths: Iterable[Path]) -> tuple[Path, ...]:
 
 def is_database_directory(path: Path) -> bool:
     """Whether ``path`` is a directory holding Lensfun database files: one of
-    its first few ``*.xml`` files names ``<lensdatabase`` in its first kilobyte."""
+    the first few files liblensfun reads there (:func:`database_entries`)
+    names ``<lensdatabase`` in its first kilobyte."""
     try:
-        candidates = sorted(p for p in os.listdir(path) if p.lower().endswith(".xml"))[:3]
+        candidates = [name for name, _ in database_entries(path)[:3]]
     except OSError:
         return False
     for name in candidates:
@@ -227,39 +233,93 @@ def reason(error: OSError) -> str:
     return error.strerror or str(error)
 
 
-def _xml_entries(path: Path) -> list[tuple[str, bool]]:
-    """(name, whether it is a symbolic link) of each ``*.xml`` entry directly
-    inside a directory, sorted by name: anything so named but a directory,
-    so that a FIFO, a device, a dangling link or a link loop named ``*.xml``
-    is reported as unreadable rather than silently skipped."""
+def loaded_name(name: str) -> bool:
+    """Whether liblensfun reads an entry of a database directory so named.
+
+    lfDatabase::Load matches each name in a directory against GLib's pattern
+    ``*.xml``: case-sensitive (``A.XML`` is not read), hidden names included
+    (``.a.xml``, even ``.xml``), and a directory so named is read as a
+    database directory in turn.
+    """
+    return name.endswith(".xml")
+
+
+def _loaded_children(directory: Path) -> list[tuple[str, bool, bool]]:
+    """(name, whether a directory, whether a link) of the entries of one
+    directory that liblensfun reads (:func:`loaded_name`), sorted by name; a
+    link counts as what it leads to, as GLib's test for a directory does."""
     found = []
-    with os.scandir(path) as entries:
+    with os.scandir(directory) as entries:
         for item in entries:
-            if not item.name.lower().endswith(".xml"):
+            if not loaded_name(item.name):
                 continue
             try:
-                directory = item.is_dir()
+                is_directory = item.is_dir()
             except OSError:  # a link loop: is_dir() gives up, stat() would raise
-                directory = False
-            if not directory:
-                found.append((item.name, item.is_symlink()))
+                is_directory = False
+            found.append((item.name, is_directory, item.is_symlink()))
     return sorted(found)
 
 
+def database_entries(directory: str | os.PathLike[str]) -> list[tuple[str, bool]]:
+    """(name relative to ``directory``, whether a link leads to it) of every
+    file liblensfun reads from a database directory, in name order.
+
+    As lfDatabase::Load, each entry named ``*.xml`` (:func:`loaded_name`) that
+    is not a directory, and the files of each directory so named, read the
+    same way (``sub.xml/a.xml``, links followed). Anything so named but a
+    directory is listed, and so is a subdirectory that cannot be listed, so
+    that a FIFO, a device, a dangling link or a link loop is reported as
+    unreadable rather than silently skipped. A link back to a directory being
+    listed is not followed: liblensfun reads the same files again there, until
+    the path is too long. Raises ``OSError`` when ``directory`` itself cannot
+    be listed.
+    """
+    found: list[tuple[str, bool]] = []
+    root = Path(directory)
+    # (relative name, path to list or None for a file, reached through a link, real paths above)
+    stack: list[tuple[str, Path | None, bool, frozenset[str]]] = [
+        ("", root, False, frozenset({os.path.realpath(root)}))
+    ]
+    while stack:
+        name, path, link, above = stack.pop()
+        if path is None:
+            found.append((name, link))
+            continue
+        try:
+            children = _loaded_children(path)
+        except OSError:
+            if path is root:
+                raise
+            found.append((name, link))  # reading it says why it cannot be listed
+            continue
+        for child, is_directory, is_link in reversed(children):
+            relative = f"{name}/{child}" if name else child
+            if not is_directory:
+                stack.append((relative, None, link or is_link, above))
+                continue
+            real = os.path.realpath(path / child)
+            if real not in above:
+                stack.append((relative, path / child, link or is_link, above | {real}))
+    return found
+
+
 def expand(paths: Paths) -> list[tuple[Path, str]]:
-    """(path, display name) of every XML file the paths designate.
+    """(path, display name) of every XML file the paths designate: the files
+    liblensfun reads from each directory (:func:`database_entries`), and the
+    files given directly, whatever their names.
 
     Directory entries are named relative to the directory given; files given
     directly keep the path as given. Paths are resolved where they can be: a
     link that leads nowhere keeps its own path, to be reported when it is
-    read. Raises :class:`LoadError` when a path does not exist or a
-    directory holds no XML.
+    read. Raises :class:`LoadError` when a path does not exist, is empty or
+    a directory holds no XML.
     """
-    if isinstance(paths, (str, os.PathLike)):
+    if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
     targets: list[tuple[Path, str]] = []
     seen: set[str] = set()
-    for given in map(Path, paths or ()):
+    for given in map(_path, paths or ()):
         for real, name in _files_of(given):
             # The same file named twice (db and db/x.xml, or a link) is read once.
             if real not in seen:
@@ -282,14 +342,11 @@ def _files_of(given: Path) -> list[tuple[str, str]]:
     if not stat.S_ISDIR(mode):
         raise LoadError(f"{shown}: not a regular file or directory")
     try:
-        entries = _xml_entries(given)
+        entries = database_entries(given)
     except OSError as error:
         raise LoadError(f"{shown}: cannot list directory: {reason(error)}") from None
     if not entries:
-        raise LoadError(
-            f"{shown}: directory holds no *.xml files (give a Lensfun database "
-            "directory, a Lensfun checkout, or XML files)"
-        )
+        raise LoadError(f"{shown}: directory holds no *.xml files {_no_files_hint(given)}")
     # The directory resolved once: a file in it that is not a link resolves to
     # the directory's real path and its own name.
     base = os.path.realpath(given)
@@ -297,6 +354,18 @@ def _files_of(given: Path) -> list[tuple[str, str]]:
         (_real(given / name) if link else os.path.join(base, name), display_path(name))
         for name, link in entries
     ]
+
+
+def _no_files_hint(directory: Path) -> str:
+    """What to give instead of a directory without files liblensfun reads,
+    naming a file whose suffix is ``.xml`` in another case (``A.XML``)."""
+    try:
+        other = sorted(name for name in os.listdir(directory) if name.lower().endswith(".xml"))
+    except OSError:
+        other = []
+    if other and not loaded_name(other[0]):
+        return f"(liblensfun reads names ending in lower-case .xml, not {display_path(other[0])})"
+    return "(give a Lensfun database directory, a Lensfun checkout, or XML files)"
 
 
 def _real(path: Path) -> str:
