@@ -16,8 +16,8 @@ from .. import pipeline
 from ..read import Cache, parallel
 from ..read.records import DistortionEntry
 from . import rules
-from .duplicates import Known
 from .inputs import Source
+from .known import Known
 from .parsing import ParsedSource, parse_sources
 from .result import DEFAULT_MARGIN, CheckedFile, Finding, Identified
 from .rules.fold import fix_suggestion

@@ -88,7 +88,7 @@ class Context:
     read: Sequence[Any]  # ParsedSource: imported lazily by the modules that need it
     margin: float
     verbose: bool
-    known: Any = None  # lensaudit.check.duplicates.Known, what a baseline holds
+    known: Any = None  # lensaudit.check.known.Known, what a baseline holds
     solved: Sequence[tuple[list, list[float]]] | None = None
     _memo: dict = field(default_factory=dict, repr=False)
 
