@@ -24,7 +24,7 @@ TCA_FOLD_IN_IMAGE = Rule(
     "radii onto one and mirrors the channel beyond.",
     fails=(
         "the PowerShot A640's <tca> br=-0.0002379 with three zeros lost (br=-0.2379): the red "
-        "channel peaks at r = 1.184 of 1.803 (no Lensfun entry folds)"
+        "channel peaks at r = 1.184 of 1.667 (no Lensfun entry folds)"
     ),
     passes=(
         "compact-canon.xml:2211, the A640's <tca> as written: the red channel folds at 37.4, 22 "
