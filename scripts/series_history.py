@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from lensaudit import read as reader  # noqa: E402
 from lensaudit.check.parsing import ParsedSource  # noqa: E402
-from lensaudit.check.series import series_outliers  # noqa: E402
+from lensaudit.check.rules.focal_series_outlier import series_outliers  # noqa: E402
 from recall import DISTORTION, Element, changes, elements, git, whole_database  # noqa: E402
 
 

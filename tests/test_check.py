@@ -468,6 +468,7 @@ def test_bundled_database_counts_every_entry_and_has_no_input_errors(bundled_db)
         "undefined-mount",
         "inversion-fails-in-image",
         "focal-series-outlier",
+        "fixed-lens-crop-factor",
     }
 
 

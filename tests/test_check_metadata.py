@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from lensaudit.check import check
-from lensaudit.check.metadata import is_fixed_lens_mount, mount_key
+from lensaudit.check.rules.undefined_mount import is_fixed_lens_mount, mount_key
 from lensaudit.cli import main
 
 MOUNTS = "  <mount><name>Pentax K</name></mount>\n  <mount><name>Canon EF</name></mount>\n"

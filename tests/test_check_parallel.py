@@ -13,6 +13,7 @@ import pytest
 
 from lensaudit.check import check
 from lensaudit.check import findings as rules
+from lensaudit.check.rules import duplicate_lens
 from lensaudit.read import parallel
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this system")
@@ -83,7 +84,7 @@ def test_the_rules_across_files_on_another_core_find_what_they_find_here(
     # every file: one more item of the rules' work, which the first core free
     # takes. This process is slowed here, so that the other takes it.
     parent = os.getpid()
-    made, duplicates = rules._rules, rules.duplicate_lenses
+    made, duplicates = rules._rules, duplicate_lens.duplicate_lenses
 
     def slow_here(*args, **kwargs):
         if os.getpid() == parent:
@@ -97,7 +98,7 @@ def test_the_rules_across_files_on_another_core_find_what_they_find_here(
         return duplicates(*args, **kwargs)
 
     monkeypatch.setattr(rules, "_rules", slow_here)
-    monkeypatch.setattr(rules, "duplicate_lenses", marked)
+    monkeypatch.setattr(duplicate_lens, "duplicate_lenses", marked)
     monkeypatch.setattr(parallel, "cpus", lambda: 2)
     assert _checked(bundled_db, verbose=False) == alone
     assert [p.name for p in tmp_path.iterdir()] != [f"across-{parent}"]

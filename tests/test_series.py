@@ -16,7 +16,7 @@ import pytest
 
 from conftest import git_commit
 from lensaudit.check import check
-from lensaudit.check.series import displacement
+from lensaudit.check.rules.focal_series_outlier import displacement
 
 ROOT = Path(__file__).resolve().parents[1]
 CODE = "focal-series-outlier"

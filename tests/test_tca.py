@@ -21,6 +21,7 @@ from lxml import etree
 
 from conftest import lens_xml
 from lensaudit import calibrations, tca
+from lensaudit.check.rules import tca_fold_in_image as tca_rule
 
 R = sympy.Symbol("r")
 
@@ -293,7 +294,7 @@ def test_findings_name_the_folding_channel(write_xml):
             '<tca model="poly3"/>',
         )
     )
-    found = tca.findings(tca.audit(path.parent).records())
+    found = tca_rule.findings(tca.audit(path.parent).records())
     assert [(severity, code, line) for severity, code, _, line, _ in found] == [
         ("error", "tca-fold-in-image", 10),
         ("error", "tca-fold-in-image", 12),

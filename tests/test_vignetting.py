@@ -26,6 +26,8 @@ from lxml import etree
 
 from conftest import lens_xml
 from lensaudit import calibrations, vignetting
+from lensaudit.check.rules import tca_fold_in_image as tca_rule
+from lensaudit.check.rules import vignetting as vignetting_rules
 from lensaudit.read import LoadError, read_bytes
 from lensaudit.read.paths import bundled_database_path
 
@@ -370,9 +372,9 @@ def test_the_fe_85_gm_entry_lensfun_removed_brightens_its_corners_3_4_fold():
     got = computed("0.026", "1.27", "1.13")
     assert got["brightens"] and got["severity"] == "warning"
     assert got["c_max"] == pytest.approx(3.426, rel=1e-15) and got["r_cmax"] == 1
-    (finding,) = vignetting.findings([{**dict.fromkeys(vignetting.COLUMNS, ""), **got,
+    (finding,) = vignetting_rules.findings([{**dict.fromkeys(vignetting.COLUMNS, ""), **got,
                                        "file": "f.xml", "line": 3, "status": "ok"}])  # fmt: skip
-    assert finding[1] == vignetting.BRIGHTENS and "3.43 times as bright" in finding[4]
+    assert finding[1] == vignetting_rules.BRIGHTENS.code and "3.43 times as bright" in finding[4]
 
 
 @settings(max_examples=60, deadline=None)
@@ -517,7 +519,7 @@ def test_findings_give_one_per_entry_with_its_code_and_severity(write_xml):
             '<vignetting model="pa" focal="12" aperture="4" k1="-0.3"/>',
         )
     )
-    found = vignetting.findings(vignetting.audit(path.parent).records())
+    found = vignetting_rules.findings(vignetting.audit(path.parent).records())
     assert [(severity, code, line) for severity, code, _, line, _ in found] == [
         ("error", "vignetting-zero-in-image", 10),
         ("warning", "vignetting-low-in-image", 11),
@@ -530,7 +532,7 @@ def test_findings_give_one_per_entry_with_its_code_and_severity(write_xml):
 
 def test_findings_leave_whole_file_problems_to_the_distortion_check(write_xml):
     path = write_xml("<lensdatabase><lens>")
-    assert vignetting.findings(vignetting.audit(path).records()) == []
+    assert vignetting_rules.findings(vignetting.audit(path).records()) == []
 
 
 # --- the report ------------------------------------------------------------
@@ -679,8 +681,8 @@ def test_a_mutated_file_never_crashes_and_every_element_is_one_record(mutated):
     tca_records = calibrations.CalibrationRecords.of_file("tca", name, tables.tca)
     error = tables.error
     for records, audit_entries, module in (
-        (vignetting_records, vignetting.audit_entries, vignetting),
-        (tca_records, tca.audit_entries, tca),
+        (vignetting_records, vignetting.audit_entries, vignetting_rules),
+        (tca_records, tca.audit_entries, tca_rule),
     ):
         audit = audit_entries(records)
         module.findings(audit.records())

@@ -21,7 +21,7 @@ exactly on the coefficients as written
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -31,8 +31,6 @@ from .calibrations import (
     SEVERITY_ERROR,
     TCA,
     CalibrationAudit,
-    Finding,
-    findings_of,
     sign_change_before,
 )
 from .columns import LENS_COLUMNS, LENS_FLOAT_COLUMNS, STATUS_COLUMNS
@@ -41,7 +39,6 @@ from .metrics import image_radius
 
 FloatArray = NDArray[np.float64]
 
-FOLD_IN_IMAGE = "tca-fold-in-image"
 
 CHANNELS = ("red", "blue")
 
@@ -226,35 +223,3 @@ class TCAAudit(CalibrationAudit):
 audit_entries = TCAAudit.of_entries
 audit = TCAAudit.read
 of_database = TCAAudit.of_database
-
-
-def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
-    """(severity, code, file, line, message) for each audited record that folds
-    inside its image (``tca-fold-in-image``, an error), and an error for each
-    record that could not be audited (``missing-attribute``, ``bad-value``,
-    ``unknown-model``, ``no-lens``; whole-file problems are left to the
-    distortion check, which reports them once per file).
-
-    ``records`` are dicts with :data:`COLUMNS` keys, as
-    :meth:`TCAAudit.records` gives them.
-    """
-    return findings_of(records, "tca", _finding)
-
-
-def _finding(record: dict[str, Any]) -> tuple[str, str, str] | None:
-    """(severity, code, text) of an audited record, or None."""
-    if not record["folds_in_image"]:
-        return None
-    r_corner = record["r_corner"]
-    parts = []
-    for channel in CHANNELS:
-        radius = record[f"r_fold_{channel}"]
-        if radius == 0:
-            parts.append(f"the {channel} channel's r_d decreases from the centre")
-        elif radius < r_corner:
-            parts.append(f"the {channel} channel's r_d peaks at r = {radius:.4g}")
-    text = (
-        f"{' and '.join(parts)}, inside the image (to r = {r_corner:.4g}, Hugin units): "
-        "the correction maps two radii onto one and mirrors that channel beyond"
-    )
-    return SEVERITY_ERROR, FOLD_IN_IMAGE, text

@@ -38,7 +38,7 @@ brightens, ``notice`` for a C that is not monotone over the image.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from fractions import Fraction
 from typing import Any
 
@@ -53,10 +53,8 @@ from .calibrations import (
     VIGNETTING,
     CalibrationAudit,
     ExactTurn,
-    Finding,
     as_written,
     exact_turning_points,
-    findings_of,
     sign_change_before,
     sign_of,
     sign_of_surd,
@@ -78,10 +76,6 @@ _LOW_EXACT = Fraction(1, 10)
 BRIGHTENING = 1.05
 _BRIGHTENING_EXACT = Fraction(105, 100)
 
-ZERO_IN_IMAGE = "vignetting-zero-in-image"
-LOW_IN_IMAGE = "vignetting-low-in-image"
-NOT_MONOTONE = "vignetting-not-monotone"
-BRIGHTENS = "vignetting-brightens"
 
 #: How many entries the terminal summary lists by name.
 WORST_SHOWN = 15
@@ -446,61 +440,3 @@ class VignettingAudit(CalibrationAudit):
 audit_entries = VignettingAudit.of_entries
 audit = VignettingAudit.read
 of_database = VignettingAudit.of_database
-
-
-def findings(records: Iterable[dict[str, Any]]) -> list[Finding]:
-    """(severity, code, file, line, message) for each audited record with a
-    finding, and an error for each record that could not be audited (except
-    whole-file problems, which the distortion check reports once per file).
-
-    ``records`` are dicts with :data:`COLUMNS` keys, as
-    :meth:`VignettingAudit.records` gives them. Codes:
-    ``vignetting-zero-in-image`` (error), ``vignetting-low-in-image``
-    (warning), ``vignetting-not-monotone`` (notice), and the status codes
-    ``missing-attribute``, ``bad-value``, ``unknown-model``, ``no-lens``.
-    """
-    return findings_of(records, "vignetting", _finding)
-
-
-def _finding(record: dict[str, Any]) -> tuple[str, str, str] | None:
-    """(severity, code, text) of an audited record, or None."""
-    severity = record["severity"]
-    if not severity:
-        return None
-    c_min, r_min, r_corner = record["c_min"], record["r_min"], record["r_corner"]
-    where = "the frame corner" if r_corner == 1 else "the image circle"
-    at = f"r = {r_min:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g}, {where})"
-    if severity == SEVERITY_ERROR:
-        code = ZERO_IN_IMAGE
-        r_zero = record["r_zero"]
-        crossing = (
-            f"crossing zero at r = {r_zero:.4g}"
-            if r_zero <= r_corner
-            else "touching zero without crossing"
-        )
-        text = (
-            f"C(r) = 1 + k1 r^2 + k2 r^4 + k3 r^6 reaches {c_min:.4g} at {at}, "
-            f"{crossing}: the correction divides by zero there and flips the sign "
-            "of the pixels where C < 0"
-        )
-    elif severity == SEVERITY_WARNING and record["low_in_image"]:
-        code = LOW_IN_IMAGE
-        text = (
-            f"C(r) falls to {c_min:.4g} at {at}: the correction multiplies those pixels "
-            f"(and their noise) by {1 / c_min:.3g}"
-        )
-    elif severity == SEVERITY_WARNING:
-        code = BRIGHTENS
-        at = f"r = {record['r_cmax']:.3g} (r = 1 at half the diagonal; image to {r_corner:.3g})"
-        text = (
-            f"C(r) rises to {record['c_max']:.4g} at {at}: the model has that part of the "
-            f"image {record['c_max']:.3g} times as bright as its centre, which no lens is; "
-            "the correction darkens it"
-        )
-    else:
-        code = NOT_MONOTONE
-        text = (
-            f"C(r) turns at r = {record['r_turn']:.4g}, inside the image "
-            f"(to {r_corner:.3g}): the brightness model is not monotone"
-        )
-    return severity, code, text

@@ -4,47 +4,10 @@
 :class:`Finding` records, each with a severity, a code, ``file:line`` and one
 sentence. Errors make the check fail; warnings and notices do not.
 
-- Folds (entries that load and were audited): ``fold-in-image`` (error) when
-  the model folds back inside its own image, r_normalized < 1;
-  ``fold-near-image`` (warning) when the fold lies just outside, r_normalized
-  below the margin; ``fold-outside-image`` (notice, only when asked for) for
-  any other finite r_max. r_normalized = D(r_max) / hypot(aspect, 1), both in
-  Hugin units (1 = half the short side of the calibration image).
-- Zooms as liblensfun interpolates them (see :mod:`lensaudit.check.between`):
-  ``fold-between-calibrations`` (error) when, at some focal length between
-  two calibrations of a lens that do not fold themselves, the model
-  liblensfun interpolates folds back inside the image; proven over every
-  focal length, not sampled.
-- Input (errors): ``xml-error`` (the file is not well-formed XML; its entries
-  are counted but not checked further), ``not-a-database`` (well-formed, but
-  its root is not ``<lensdatabase>``), ``unreadable``, ``missing-attribute``,
-  ``bad-value`` (not a finite number, focal or crop factor <= 0),
-  ``unknown-model``, ``no-lens``, ``r-max-not-computable``,
-  ``liblensfun-refuses`` (Lensfun master's liblensfun stops loading the file
-  there and loses the lenses after it; see :mod:`lensaudit.check.loading`;
-  not repeated for a file that is ``xml-error`` at that spot).
-- Vignetting and TCA (see :mod:`lensaudit.vignetting` and :mod:`lensaudit.tca`):
-  ``vignetting-zero-in-image`` (error) when the correction's C(r) reaches 0
-  inside the image, ``vignetting-low-in-image`` (warning) when it falls below
-  0.1, ``vignetting-not-monotone`` (notice, only when asked for) when it turns,
-  ``tca-fold-in-image`` (error) when a colour channel folds inside the image;
-  a ``<vignetting>`` or ``<tca>`` element that cannot be audited is one of the
-  input errors above, its message naming the element.
-- Duplicates: ``duplicate-lens`` (maker, model and crop factor of an earlier
-  ``<lens>``, names compared ignoring letter case and runs of white space)
-  and ``duplicate-focal`` (a second ``<distortion>`` for the same focal
-  length in one calibration) are errors, or warnings when the two are
-  identical, since liblensfun then loses nothing by keeping one of them.
-- Metadata Lensfun's own CI does not check (warnings, see
-  :mod:`lensaudit.check.metadata`): ``undefined-mount``,
-  ``conflicting-calibration``, ``vignetting-starting-values``.
-- Inversion (warning, see :mod:`lensaudit.check.inversion`):
-  ``inversion-fails-in-image`` where liblensfun's reverse transform cannot
-  invert the model by its Newton steps inside the image (not reported for an
-  entry that is ``fold-in-image``).
-- Focal series (a warning, see :mod:`lensaudit.check.series`):
-  ``focal-series-outlier``, a distortion entry whose displacement D(r) - r
-  lies far from what its neighbours in focal length predict.
+The rules are the registry of :mod:`lensaudit.check.rules`: one record per
+finding code (its severity, scope, summary and documentation) and one module
+per family of codes, named after them; ``lensaudit check --help`` and
+docs/ci.md list them.
 
 With a baseline (a directory, or a git revision of the repository that holds
 the database, read with ``git ls-tree`` and ``git cat-file`` so that the work
@@ -71,9 +34,9 @@ and the notice says that too.
 The stages, one module each: :mod:`~lensaudit.check.inputs` (the files
 checked and the baseline's), :mod:`~lensaudit.check.parsing` (each file
 read once by :mod:`lensaudit.read`, the one reader every command uses),
-:mod:`~lensaudit.check.findings` and :mod:`~lensaudit.check.duplicates` (the
-rules, with :mod:`~lensaudit.check.metadata` and :mod:`~lensaudit.check.series`),
-:mod:`~lensaudit.check.matching` (what the baseline already has) and
+:mod:`~lensaudit.check.findings` (the registry's rules run on the parsed
+files, on every core), :mod:`~lensaudit.check.matching` and
+:mod:`~lensaudit.check.known` (what the baseline already has) and
 :mod:`~lensaudit.check.result` (the records); the output formats are
 :mod:`lensaudit.check_formats`. With ``cache=True``, the reader's tables of
 each file are kept by the content of its bytes (:class:`lensaudit.read.Cache`,
@@ -89,7 +52,6 @@ from collections.abc import Sequence
 from typing import Any
 
 from .. import read as reader
-from .duplicates import Known
 from .inputs import (
     HISTORY_DEPTH,
     GitOrigin,
@@ -99,6 +61,7 @@ from .inputs import (
     sources_from_git,
     sources_from_paths,
 )
+from .known import Known
 from .matching import baseline_notices, compare, readable_baseline
 from .parsing import ParsedSource, parse_sources
 from .result import (

@@ -1,80 +1,28 @@
-"""The rules: from parsed files to findings, each with the identities that
-match it against a baseline's (:class:`lensaudit.check.result.Identified`).
-
-Input problems, folds and failed inversions (:mod:`lensaudit.check.inversion`)
-of the distortion entries, the vignetting and TCA audits' findings, then the
-duplicates (:mod:`lensaudit.check.duplicates`), the zooms' folds between
-calibrations (:mod:`lensaudit.check.between`), the metadata Lensfun's own CI
-does not check (:mod:`lensaudit.check.metadata`) and the entries that break
-their lens's focal series (:mod:`lensaudit.check.series`).
+"""From parsed files to findings, each with the identities that match it
+against a baseline's (:class:`lensaudit.check.result.Identified`): the
+registry's rules (:mod:`lensaudit.check.rules`) run on every core, those that
+look at each file alone on a share of the files each, those that look across
+files once, beside them; the metrics of the distortion entries worked out
+first (or taken from the cache).
 """
 
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
-from .. import calibrations, pipeline, tca, vignetting
-from ..metrics import is_circular_fisheye
+from .. import pipeline
 from ..read import Cache, parallel
-from ..read.records import (
-    STATUS_BAD_VALUE,
-    STATUS_MISSING_ATTRIBUTE,
-    STATUS_NO_LENS,
-    STATUS_NOT_DATABASE,
-    STATUS_OK,
-    STATUS_UNKNOWN_MODEL,
-    STATUS_UNREADABLE,
-    DistortionEntry,
-)
-from ..read.tables import TCA, VIGNETTING
-from .between import folds_between
-from .duplicates import Known, duplicate_focals, duplicate_lenses
+from ..read.records import DistortionEntry
+from . import rules
 from .inputs import Source
-from .inversion import inversion_findings
-from .loading import liblensfun_refusals
-from .matching import calibration_content, entry_content, file_identified, lens_identity
-from .metadata import conflicting_calibrations, starting_values, undefined_mounts
+from .known import Known
 from .parsing import ParsedSource, parse_sources
-from .result import (
-    BAD_VALUE,
-    DEFAULT_MARGIN,
-    FOLD_IN_IMAGE,
-    FOLD_NEAR_IMAGE,
-    FOLD_OUTSIDE_IMAGE,
-    MISSING_ATTRIBUTE,
-    NO_LENS,
-    NOT_A_DATABASE,
-    NOT_COMPUTABLE,
-    SEVERITY_ERROR,
-    SEVERITY_NOTICE,
-    SEVERITY_WARNING,
-    UNKNOWN_MODEL,
-    UNREADABLE,
-    CheckedFile,
-    Finding,
-    Identified,
-    clip,
-    clip_key,
-    entry_finding,
-    entry_key,
-)
-from .series import series_outliers
+from .result import DEFAULT_MARGIN, CheckedFile, Finding, Identified
+from .rules.fold import fix_suggestion
 
-#: Vignetting or TCA records audited in one batch of arrays.
-_RECORDS_AT_ONCE = 16384
-
-_STATUS_CODES = {
-    STATUS_MISSING_ATTRIBUTE: MISSING_ATTRIBUTE,
-    STATUS_BAD_VALUE: BAD_VALUE,
-    STATUS_UNKNOWN_MODEL: UNKNOWN_MODEL,
-    STATUS_NO_LENS: NO_LENS,
-    STATUS_UNREADABLE: UNREADABLE,
-    STATUS_NOT_DATABASE: NOT_A_DATABASE,
-}
+__all__ = ["analyse", "analyse_parsed", "file_findings", "fix_suggestion"]
 
 
 def analyse(
@@ -115,13 +63,9 @@ def analyse_parsed(
 
     def across() -> list[tuple[int, tuple]]:
         """The findings of the rules that look across files, as plain data."""
-        found = [*duplicate_lenses(read, known), *undefined_mounts(read)]
-        found += [(i, item) for i, file in enumerate(read) for item in liblensfun_refusals(file)]
-        return [(index, _plain(item)) for index, item in found]
+        context = rules.Context(read, margin, verbose, known)
+        return [(index, _plain(item)) for index, item in rules.run(rules.families(True), context)]
 
-    for index, file in enumerate(read):
-        if file.problem is not None:
-            add(index, file_identified(file))
     own_findings, across_files = file_findings(read, margin, verbose, cache, known, own, across)
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
@@ -253,44 +197,12 @@ def _rules(
     known: Known | None,
 ) -> list[list[Identified]]:
     """The findings each of ``read`` (files that parsed) makes alone, given the
-    metrics and r_corner of each one's entries (``solved``)."""
+    metrics and r_corner of each one's entries (``solved``): the registry's
+    rules that look at each file alone (:func:`lensaudit.check.rules.families`)."""
     found: list[list[Identified]] = [[] for _ in read]
-    entries = [(index, entry) for index, file in enumerate(read) for entry in file.entries]
-    metrics = [m for file_metrics, _ in solved for m in file_metrics]
-    corners = [c for _, file_corners in solved for c in file_corners]
-    inversions = inversion_findings([entry for _, entry in entries])
-    for position, (index, entry) in enumerate(entries):
-        if entry.status != STATUS_OK:
-            code = _STATUS_CODES.get(entry.status, BAD_VALUE)
-            made = [entry_finding(SEVERITY_ERROR, code, entry, entry.message)]
-        else:
-            entry_metrics = metrics[position]
-            fold = None
-            if entry_metrics is not None:  # None: never folds
-                fold = _fold_finding(entry, entry_metrics, margin, verbose)
-            made = [fold, inversions[position]]
-            if fold is not None and fold.code == FOLD_IN_IMAGE:
-                made = [fold]  # the fold is the finding; its inversion fails too, for that
-        for finding in made:
-            if finding is None:
-                continue
-            content = (finding.severity, finding.code, entry_content(entry))
-            # The lens by name first; then by content alone, for a renamed lens.
-            keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
-            found[index].append(Identified(finding, keys, (read[index].source.file_name,)))
-    for index, item in calibration_findings(read, verbose):
+    context = rules.Context(read, margin, verbose, known, solved)
+    for index, item in rules.run(rules.families(False), context):
         found[index].append(item)
-    for index, item in duplicate_focals(read, known):
-        found[index].append(item)
-    names = [read[index].source.file_name for index, _ in entries]
-    folding = [m is not None and not m.r_normalized >= 1 for m in metrics]
-    for position, item in folds_between([e for _, e in entries], corners, folding, names, verbose):
-        found[entries[position][0]].append(item)
-    for index, item in series_outliers(read):
-        found[index].append(item)
-    for index, file in enumerate(read):
-        found[index] += conflicting_calibrations(file)
-        found[index] += starting_values(file)
     return found
 
 
@@ -353,137 +265,3 @@ def _entry_metrics(entries: list[DistortionEntry]) -> list[_EntryMetrics | None]
             nan = math.nan
             results.append(_EntryMetrics(nan, nan, nan, nan, f"{type(error).__name__}: {error}"))
     return results
-
-
-def _fold_finding(
-    entry: DistortionEntry, m: _EntryMetrics, margin: float, verbose: bool
-) -> Finding | None:
-    if m.problem or m.r_max != m.r_max:
-        reason = m.problem or "the solver returned no value"
-        return entry_finding(
-            SEVERITY_ERROR, NOT_COMPUTABLE, entry, f"r_max could not be computed ({reason})"
-        )
-    if math.isinf(m.r_max):
-        return None
-    if m.r_max == 0:
-        return entry_finding(
-            SEVERITY_ERROR,
-            FOLD_IN_IMAGE,
-            entry,
-            "D(r) decreases from the image centre (D'(0) <= 0): the model folds back at once",
-        )
-
-    image = "image circle" if is_circular_fisheye(entry.lens, entry.type) else "image corner"
-    where = (
-        f"D(r) peaks at D(r_max) = {m.d_max:.4g} for r_max = {m.r_max:.4g}, "
-        f"{m.r_normalized:.3f} times the {image} {m.r_corner:.4g} (Hugin units)"
-    )
-    if m.r_normalized < 1:
-        return entry_finding(
-            SEVERITY_ERROR,
-            FOLD_IN_IMAGE,
-            entry,
-            f"the model folds back inside its own image: {where}; "
-            f"undistortion mirrors pixels beyond that radius; {fix_suggestion(entry)}",
-        )
-    if m.r_normalized < margin:
-        return entry_finding(
-            SEVERITY_WARNING,
-            FOLD_NEAR_IMAGE,
-            entry,
-            f"the model folds back just outside its image, within the margin {margin:g}: {where}",
-        )
-    if verbose:
-        return entry_finding(
-            SEVERITY_NOTICE,
-            FOLD_OUTSIDE_IMAGE,
-            entry,
-            f"the model folds back outside its image: {where}",
-        )
-    return None
-
-
-def fix_suggestion(entry: DistortionEntry) -> str:
-    """The ``lensaudit fix`` command that refits this entry, on the same database.
-
-    The lens name goes in double quotes (single-quoted text is what messages
-    shorten), with the characters a POSIX shell expands there escaped.
-    """
-    lens = re.sub(r'([\\"$`])', r"\\\1", entry.lens)
-    return f'`lensaudit fix --lens "{lens}" --focal {entry.focal:g}` refits it'
-
-
-def calibration_findings(
-    read: Sequence[ParsedSource], verbose: bool
-) -> Iterable[tuple[int, Identified]]:
-    """Findings of the vignetting and TCA audits in the files that parsed.
-
-    Their identity is content, as for distortion entries: the kind, the
-    entry's own values, then its lens by name.
-    """
-    shown = {SEVERITY_ERROR, SEVERITY_WARNING} | ({SEVERITY_NOTICE} if verbose else set())
-    parsed = [(index, file) for index, file in enumerate(read) if file.problem is None]
-    for kind, module in ((VIGNETTING, vignetting), (TCA, tca)):
-        parts = [file.calibrations[kind] for _, file in parsed if kind in file.calibrations]
-        records = calibrations.CalibrationRecords.joined(kind, parts)
-        if not records:
-            continue
-        owners = [
-            index for index, file in parsed for _ in range(len(file.calibrations.get(kind, ())))
-        ]
-        # Each record is audited alone: a part at a time, the audit's arrays stay small.
-        for start in range(0, len(records), _RECORDS_AT_ONCE):
-            part = records.part(start, start + _RECORDS_AT_ONCE)
-            for position, item in _calibration_findings(kind, module, part, shown):
-                index = owners[start + position]
-                yield index, item._replace(names=(read[index].source.file_name,))
-
-
-def _calibration_findings(
-    kind: str, module: Any, records: calibrations.CalibrationRecords, shown: set[str]
-) -> Iterable[tuple[int, Identified]]:
-    """(position in ``records``, finding) of each of the vignetting or TCA
-    audit's findings whose severity is ``shown``; its file names come later."""
-    import numpy as np  # numpy: only where arrays are needed, not on importing this module
-
-    with np.errstate(all="ignore"):
-        audit = module.audit_entries(records)
-    severities = audit.metrics["severity"].tolist()
-    # Entry objects only for the records with a finding: a database has tens of thousands.
-    for position, status in enumerate(records.column("status")):
-        if status == STATUS_OK:
-            if severities[position] not in shown:
-                continue
-        elif status not in calibrations.STATUS_CODES:
-            continue
-        entry = records[position]
-        record = _calibration_record(audit, position)
-        for severity, code, _, _, message in module.findings([record]):
-            finding = Finding(
-                severity,
-                code,
-                entry.file,
-                entry.line,
-                0,
-                clip(message),
-                clip_key(entry_key(entry)),  # the same fields as a distortion entry's
-            )
-            content = (severity, code, kind, calibration_content(entry))
-            keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
-            yield position, Identified(finding, keys, ())
-
-
-def _calibration_record(audit: calibrations.CalibrationAudit, position: int) -> dict:
-    """One entry of a vignetting or TCA audit as the dict its ``records()`` gives."""
-    entry = audit.entries[position]
-    ok = entry.status == STATUS_OK
-    record = {}
-    for name in audit.COLUMNS:
-        if name not in audit.METRIC_COLUMNS:
-            record[name] = getattr(entry, name)
-        elif name in audit.BOOL_COLUMNS:
-            record[name] = bool(audit.metrics[name][position]) if ok else None
-        else:
-            value = audit.metrics[name][position]
-            record[name] = value.item() if hasattr(value, "item") else value
-    return record

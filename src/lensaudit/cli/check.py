@@ -41,42 +41,7 @@ PATH is a database directory (the files liblensfun reads there: every
 checkout around the working directory, else the one bundled with
 lensfunpy.
 
-\b
-Errors (fail the check):
-  fold-in-image        the model folds back inside its own image:
-                       D(r_max) < image corner hypot(aspect, 1)
-                       (a circular fisheye: its image circle, 1)
-  xml-error            the file is not well-formed XML (line, column)
-  not-a-database, missing-attribute, bad-value, unknown-model,
-  no-lens, duplicate-lens, duplicate-focal, unreadable,
-  r-max-not-computable (the input errors also for <vignetting>
-  and <tca> elements, which their messages name)
-  liblensfun-refuses   liblensfun master stops loading the file
-                       there and loses the lenses after it
-  vignetting-zero-in-image  C(r) <= 0 inside the image: the
-                       correction divides by zero or flips sign
-  tca-fold-in-image    a colour channel folds inside the image
-  fold-between-calibrations  a zoom's model, as liblensfun
-                       interpolates it between two calibrations
-                       that do not fold, folds inside the image
-Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
-  vignetting-low-in-image (C(r) < 0.1 inside the image);
-  vignetting-brightens (C(r) > 1.05 inside the image: brighter
-  than the centre, which no lens is); undefined-mount (a mount no
-  <mount> of the database defines); conflicting-calibration (two
-  calibrations of one lens for the same focal length, aperture and
-  distance; liblensfun uses the first); vignetting-starting-values
-  (k1=-0.3, k2=0, k3=0: the calibration script's start);
-  focal-series-outlier (a distortion entry far from what its
-  neighbours in focal length predict); duplicate-lens and
-  duplicate-focal when the two are identical;
-  inversion-fails-in-image (liblensfun's reverse transform cannot
-  invert the model by its Newton steps inside the image).
-Notices: baseline-unreadable (how a baseline file that cannot be parsed
-  was replaced).
-Notices with --verbose: fold-outside-image (any other finite r_max),
-  vignetting-not-monotone (C(r) turns inside the image).
-
+{codes}
 With --baseline, findings the baseline already has are reported as known
 and do not fail, so only new or changed entries fail the check. Entries
 are matched by content (lens name ignoring case and white space, and the
@@ -99,7 +64,18 @@ Exit status:
 """
 
 
-@click.command(help=CHECK_HELP)
+class _CheckCommand(click.Command):
+    """``check``, whose help lists the codes of the rule registry, read when
+    the help is shown (the rules import numpy, which a check needs only later)."""
+
+    def format_help_text(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        from ..check.rules import codes_help
+
+        self.help = CHECK_HELP.replace("{codes}", codes_help())
+        super().format_help_text(ctx, formatter)
+
+
+@click.command(cls=_CheckCommand, help=CHECK_HELP)
 @database_paths
 @click.option(
     "--baseline",

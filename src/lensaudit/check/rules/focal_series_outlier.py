@@ -46,16 +46,35 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from ..read.records import STATUS_OK, DistortionEntry
-from .matching import entry_content, lens_identity
-from .parsing import ParsedSource
-from .result import (
-    FOCAL_SERIES_OUTLIER,
-    SEVERITY_WARNING,
+from ...read.records import STATUS_OK, DistortionEntry
+from ..matching import entry_content, lens_identity
+from ..parsing import ParsedSource
+from ..result import (
     Identified,
     entry_finding,
     none_if_nan,
 )
+from . import WARNING, Context, Rule
+
+ORDER = 80
+
+FOCAL_SERIES_OUTLIER = Rule(
+    "focal-series-outlier",
+    WARNING,
+    "entry",
+    "a distortion entry far from what its neighbours in focal length predict",
+    "a `<distortion>` entry whose displacement D(r) - r lies far from what its neighbours in "
+    "focal length predict (see [below](#focal-series-outliers))",
+    "A calibration that breaks its lens's smooth course over focal length is often a "
+    "mistyped coefficient or a calibration of another lens.",
+    fails=(
+        "slr-canon.xml:2126, Canon EF 35-80mm f/4-5.6 III at 80 mm (Lensfun issue 1024): 0.0569 "
+        "off what 53 and 65 mm predict, 1.7 times the spread"
+    ),
+    passes="the same series at 53 mm (slr-canon.xml:2124): 0.0028 off, below the 0.01 minimum",
+)
+RULES = (FOCAL_SERIES_OUTLIER,)
+
 
 if TYPE_CHECKING:
     import numpy as np
@@ -226,10 +245,11 @@ def _finding(
         f"D(r) - r lies {deviation:.3g} (Hugin units) from what {what}{times}; "
         f"check this entry against a new calibration"
     )
-    finding = entry_finding(SEVERITY_WARNING, FOCAL_SERIES_OUTLIER, entry, text)
+    rule = FOCAL_SERIES_OUTLIER
+    finding = entry_finding(rule.severity, rule.code, entry, text)
     # The entry by its values and its lens's name; then its values alone (the
     # lens was renamed). Not its neighbours: an outlier stays known when they change.
-    content = (SEVERITY_WARNING, FOCAL_SERIES_OUTLIER, entry_content(entry))
+    content = (rule.severity, rule.code, entry_content(entry))
     keys = ((*content, lens_identity(entry.maker, entry.lens)), content)
     return Identified(finding, keys, (file.source.file_name,))
 
@@ -243,3 +263,8 @@ __all__ = [
     "displacement",
     "series_outliers",
 ]
+
+
+def find(context: Context) -> Iterable[tuple[int, Identified]]:
+    """Each outlier of its lens's focal series."""
+    return series_outliers(context.read)
