@@ -10,7 +10,8 @@ either every file of the set or none of it, and the old files in place.
 An interrupted command ends with :class:`Interrupted` (exit status 130 for
 SIGINT, 143 for SIGTERM), its temporary files removed; a temporary file
 left by a process that is gone (``kill -9``, a crash) is removed by the
-next run that writes into its directory.
+next run that writes into its directory. Whether the outputs can be
+written at all is asked before the work (:func:`unwritable`).
 """
 
 from __future__ import annotations
@@ -294,6 +295,57 @@ def _signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
+def unwritable(path: str | os.PathLike[str], directory: bool = False) -> str | None:
+    """Why ``path`` cannot be written, as one line naming it; None if it can.
+
+    A file is written into its directory, which must be there (``-`` is
+    standard output; a device or a pipe is written as it is); with
+    ``directory``, ``path`` is a directory that files are written into,
+    made with its parents where it is not there. Asked before any work, of
+    the kernel: a temporary file is made and removed in the directory that
+    would receive the files (or the nearest one there, for a directory to be
+    made), so that a read-only file system, access control lists and root
+    without the capability to override permissions answer as they will.
+    """
+    if str(path) == "-":
+        return None
+    try:
+        real = Path(os.path.realpath(path))
+    except (OSError, ValueError) as error:
+        return f"cannot write {path}: {getattr(error, 'strerror', None) or error}"
+    if directory:
+        if os.path.lexists(real) and not os.path.isdir(real):
+            return f"cannot write into {path}: not a directory"
+        receiving = real
+        while not os.path.lexists(receiving) and receiving != receiving.parent:
+            receiving = receiving.parent  # the directories from here down are made
+    else:
+        if os.path.isdir(real):
+            return f"cannot write {path}: it is a directory"
+        if os.path.lexists(real) and not os.path.isfile(real):
+            return None  # a device or a pipe: written as it is, not replaced
+        receiving = real.parent
+        if not os.path.lexists(receiving):
+            return f"cannot write {path}: no directory {receiving}"
+    if not os.path.isdir(receiving):
+        return f"cannot write {path}: {receiving} is not a directory"
+    problem = _cannot_make_files_in(receiving)
+    return f"cannot write {path}: {problem}" if problem else None
+
+
+def _cannot_make_files_in(directory: Path) -> str | None:
+    """Why no file can be made in ``directory``; None if one can (one is made
+    and removed, with the signals held so that none is left)."""
+    temporary = temporary_beside(directory / "lensaudit")
+    try:
+        with _signals_held():
+            os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+            os.unlink(temporary)
+    except OSError as error:
+        return error.strerror or str(error)
+    return None
+
+
 @contextmanager
 def output_stream(path: str | os.PathLike[str] | None) -> Iterator[IO[str]]:
     """Standard output, or a text stream whose content becomes ``path`` once the
@@ -333,6 +385,14 @@ def replace_files(contents: list[tuple[str | os.PathLike[str], bytes]]) -> None:
                 ) from None
 
 
+def check_replaceable(names: Iterable[str | os.PathLike[str]]) -> None:
+    """Raise :class:`WriteError` for the first of ``names`` that
+    :func:`replace_files` would refuse (one this user may not write, that
+    is not a regular file, or has other hard links), before any work."""
+    for name in names:
+        _writable(name, Path(os.path.realpath(name)))
+
+
 def _writable(name: str | os.PathLike[str], target: Path) -> os.stat_result:
     """The status of a file to be replaced; WriteError if it may not be."""
     problem = ""
@@ -342,6 +402,10 @@ def _writable(name: str | os.PathLike[str], target: Path) -> os.stat_result:
             # Opened for writing (not truncated): the kernel's own answer, for
             # root without the capability to override permissions too.
             os.close(os.open(target, os.O_WRONLY | os.O_NONBLOCK))
+            # Its new content is written beside it, and renamed over it.
+            reason = _cannot_make_files_in(target.parent)
+            if reason:
+                problem = f"{reason} (in its directory {target.parent})"
         else:
             problem = "not a regular file"
     except OSError as error:

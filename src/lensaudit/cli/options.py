@@ -15,6 +15,7 @@ from ..commands import (
     FORMAT_NAMES,
     fail,
     output_stream,
+    refuse_unwritable,
     refuse_writing_inputs,
     use_cache_dir,
 )
@@ -29,6 +30,7 @@ __all__ = [
     "format_option",
     "output_file",
     "output_stream",
+    "refuse_unwritable",
     "refuse_writing_inputs",
 ]
 
