@@ -173,3 +173,28 @@ def no_child_left() -> bool:
     except ChildProcessError:
         return True
     return False
+
+
+def ended_pid() -> int:
+    """The id of a process that has ended (and been reaped): a temporary file
+    named with it is abandoned."""
+    import subprocess
+    import sys
+
+    done = subprocess.Popen([sys.executable, "-c", "pass"])
+    done.wait()
+    return done.pid
+
+
+@pytest.fixture
+def running_pid():
+    """The id of another process, running for the test."""
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        yield process.pid
+    finally:
+        process.kill()
+        process.wait()

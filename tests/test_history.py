@@ -919,6 +919,28 @@ def test_cli_refuses_a_directory_that_is_not_a_repository(tmp_path):
     assert result.output.strip() == f"lensaudit: error: {tmp_path / 'plain'}: not a git repository"
 
 
+@pytest.mark.parametrize("git_there", ["none", "not executable"])
+def test_cli_says_in_one_line_that_git_cannot_be_run(tmp_path, git_there):
+    # Not "not a git repository": the repository is one, git is what is missing.
+    repository = git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING_LENS})
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    if git_there == "not executable":
+        (bin_dir / "git").write_text("#!/bin/sh\nexit 0\n")
+        (bin_dir / "git").chmod(0o644)
+    done = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "history", str(repository), "-o",
+         str(tmp_path / "out"), "--no-cache"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PATH": str(bin_dir)},
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    reason = "no git command on PATH" if git_there == "none" else "git: Permission denied"
+    assert done.stderr == f"lensaudit: error: cannot run git to read the history: {reason}\n"
+    assert done.stdout == ""
+
+
 def test_trend_figure_marks_the_paper_snapshot(repo):
     import numpy as np
     from matplotlib.dates import date2num

@@ -30,7 +30,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lensaudit.read.cache as cache_module
-from conftest import lens_xml
+from conftest import ended_pid, lens_xml
 from damage import FLIPS, flipped
 from lensaudit import pipeline
 from lensaudit.cli import main
@@ -661,19 +661,25 @@ def test_records_beyond_the_byte_bound_are_evicted(tmp_path, cache_root, monkeyp
     assert records_in(cache_root) == sorted((record[b], record[c]))
 
 
-def test_abandoned_temporary_files_are_removed_and_other_files_kept(small_db, cache_root):
+def test_abandoned_temporary_files_are_removed_and_other_files_kept(
+    small_db, cache_root, running_pid
+):
+    # A temporary file is abandoned when the process named in it is gone
+    # (killed with SIGKILL, say), whatever its age; another run's is kept.
     files = cache_root / "files"
     files.mkdir(parents=True)
-    abandoned = files / "0123.rec.99.tmp"
-    in_progress = files / "4567.rec.98.tmp"
+    gone = ended_pid()
+    abandoned = [files / f".0123.rec.{gone}.0.tmp", files / f"0124.rec.{gone}.tmp"]
+    in_progress = [files / f".4567.rec.{running_pid}.3.tmp", files / f"4568.rec.{running_pid}.tmp"]
+    old_and_nameless = files / "0125.rec.tmp"
     other = files / "notes.txt"
     beside = cache_root / "history-0.1.0.sqlite3"
-    for path in (abandoned, in_progress, other, beside):
+    for path in (*abandoned, *in_progress, old_and_nameless, other, beside):
         path.write_bytes(b"x")
-        aged(path, 2 * 3600 if path is not in_progress else 0)
+        aged(path, 2 * 3600 if path not in abandoned else 0)
     pipeline.run(small_db, cache=True)
-    assert not abandoned.exists()
-    assert in_progress.exists() and other.exists() and beside.exists()
+    assert not any(path.exists() for path in (*abandoned, old_and_nameless))
+    assert all(path.exists() for path in (*in_progress, other, beside))
 
 
 # --- records are valid for the code that made them -----------------------------------------

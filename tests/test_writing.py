@@ -7,6 +7,7 @@ what it does with links."""
 from __future__ import annotations
 
 import os
+import shlex
 import shutil
 import signal
 import stat
@@ -322,3 +323,150 @@ def test_fix_write_refuses_a_file_with_other_hard_links(tmp_path):
     done = fix_write(target)
     assert done.returncode == 2 and "2 hard links" in done.stderr
     assert target.read_text() == (tmp_path / "other.xml").read_text() == FOLDING
+
+
+# ------------------------------------------------ outputs that cannot be written
+
+
+class WorkStarted(BaseException):
+    """Raised where a command would start its work: the refusal came too late."""
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Every command's work, stopped with :class:`WorkStarted` as it starts."""
+    import lensaudit.check
+    import lensaudit.fix
+    import lensaudit.report.rmax_map
+    from lensaudit import commands
+    from lensaudit.cli import fix, history, plot, project, report
+
+    def started(*args, **kwargs):
+        raise WorkStarted
+
+    for module, name in (
+        (commands, "audit"), (commands, "read"), (lensaudit.check, "check"),
+        (report, "audit"), (history, "audit_history"), (plot, "run"),
+        (lensaudit.report.rmax_map, "rmax_map"), (fix, "run"), (lensaudit.fix, "fix_audit"),
+        (project, "_opencv_camera"),
+    ):  # fmt: skip
+        monkeypatch.setattr(module, name, started)
+
+
+@pytest.mark.parametrize(
+    "words",
+    [
+        ("scan", "{db}", "-f", "csv", "-o", "{file}/out.csv"),
+        ("scan", "{db}", "--kind", "vignetting", "-o", "{file}/out.csv"),
+        ("scan", "{db}", "-o", "{missing}/out.csv"),
+        ("check", "{db}", "-o", "{file}/findings.txt"),
+        ("report", "{db}", "-o", "{file}/report"),
+        ("report", "{db}", "-o", "{file}"),
+        ("report", "{db}", "-o", "{out}", "--force"),  # {out}/entries.csv is a directory
+        ("history", "{repo}", "-o", "{file}/history", "--no-cache"),
+        ("history", "{repo}", "-o", "{out}", "--no-cache"),  # {out}/trend.png is a directory
+        ("plot", "curve", "a.xml:10", "--db", "{db}", "-o", "{file}/curve.png"),
+        ("plot", "warp", "a.xml:10", "--db", "{db}", "-o", "{file}/warp.png"),
+        ("plot", "map", "-o", "{file}/map.png"),
+        ("fix", "{db}", "-o", "{file}/fix.txt"),
+        ("project", "--opencv", "1000,1000,500,500", "--info", "-o", "{file}/p.csv"),
+    ],
+)
+def test_an_output_that_cannot_be_written_is_refused_before_the_work(
+    capsys, db, tmp_path, no_work, words
+):
+    # A path under a regular file cannot be written, by root either.
+    places = {
+        "db": db,
+        "file": tmp_path / "a-file",
+        "missing": tmp_path / "no" / "such",
+        "out": tmp_path / "out",
+        "repo": git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING}),
+    }
+    places["file"].write_text("not a directory")
+    for name in ("entries.csv", "trend.png"):
+        (places["out"] / name).mkdir(parents=True)
+    given = [w.format(**places) for w in words]
+    code, err = run(capsys, *given)
+    output = given[given.index("-o") + 1]
+    assert code == 2, err
+    assert err.count("\n") == 1 and err.startswith("lensaudit: error: cannot write")
+    assert output in err or f"{output}/entries.csv" in err or f"{output}/trend.png" in err
+
+
+def test_report_files_already_there_are_refused_before_the_work(capsys, db, tmp_path, no_work):
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "table1.csv").write_text("mine\n")
+    code, err = run(capsys, "report", db, "-o", out)
+    assert code == 2 and "table1.csv" in err and err.count("\n") == 1
+    assert (out / "table1.csv").read_text() == "mine\n"
+
+
+def test_fix_write_refuses_a_file_it_cannot_patch_before_refitting(
+    capsys, db, tmp_path, no_work, monkeypatch
+):
+    # The database is read (which files --write may patch), the refits not begun.
+    from lensaudit import pipeline
+    from lensaudit.cli import fix
+
+    monkeypatch.setattr(fix, "run", pipeline.run)
+    os.link(db / "a.xml", tmp_path / "other.xml")
+    code, err = run(capsys, "fix", "--write", "--tolerance", "5000", db, "--no-cache")
+    assert code == 2 and "2 hard links" in err and err.count("\n") == 1
+
+
+#: ``lensaudit ARGS...`` as the console command runs it, its work stopped as it
+#: starts (exit status 3): the history, the report's audit, fix's refits.
+STOPPED_AT_THE_WORK = """\
+import sys
+import lensaudit.fix
+from lensaudit.cli import history, report
+def started(*args, **kwargs):
+    sys.stderr.write("the work started\\n")
+    raise SystemExit(3)
+history.audit_history = report.audit = lensaudit.fix.fix_audit = started
+from lensaudit.console import run
+sys.argv = ["lensaudit", *sys.argv[1:]]
+run()
+"""
+
+
+def unprivileged(*words) -> subprocess.CompletedProcess:
+    """``lensaudit WORDS`` run as this user, its work stopped as it starts (see
+    :data:`STOPPED_AT_THE_WORK`); as root, without the capabilities that let
+    root write whatever the permissions say (skipped without capsh)."""
+    command = [sys.executable, "-c", STOPPED_AT_THE_WORK, *map(str, words)]
+    if os.geteuid() == 0:
+        if shutil.which("capsh") is None:
+            pytest.skip("running as root without capsh to drop CAP_DAC_OVERRIDE")
+        drop = "cap_dac_override,cap_dac_read_search,cap_fowner"
+        line = " ".join(shlex.quote(word) for word in command)
+        command = ["capsh", f"--drop={drop}", "--", "-c", line]
+    return subprocess.run(command, capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.parametrize("command", ["history", "report", "fix"])
+def test_a_directory_without_write_permission_is_refused_before_the_work(tmp_path, command):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    words: tuple = ()
+    if command == "history":
+        repository = git_repository(tmp_path / "repo", {"data/db/a.xml": FOLDING})
+        words = ("history", repository, "-o", locked, "--no-cache", "-q")
+    elif command == "report":
+        (tmp_path / "db").mkdir()
+        (tmp_path / "db" / "a.xml").write_text(FOLDING)
+        words = ("report", tmp_path / "db", "-o", locked / "report", "--no-cache")
+    else:  # the file may be written, not its directory, where its new content goes
+        (locked / "a.xml").write_text(FOLDING)
+        words = ("fix", "--write", "--tolerance", "5000", locked, "--no-cache")
+    locked.chmod(0o555)
+    try:
+        done = unprivileged(*words)
+    finally:
+        locked.chmod(0o755)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Permission denied" in done.stderr
+    assert str(locked) in done.stderr and done.stdout == ""
+    assert sorted(p.name for p in locked.iterdir()) == (["a.xml"] if command == "fix" else [])

@@ -163,6 +163,21 @@ def refuse_writing_inputs(
         fail(f"{problem}: nothing read or written (an output never replaces an input)")
 
 
+def refuse_unwritable(files: list[Path | str | None], directory: Path | str | None = None) -> None:
+    """Exit with status 2, before any work, naming the first output that cannot
+    be written: of ``files`` (None and ``-``, standard output, always can;
+    see :func:`lensaudit.writing.unwritable`), or, given ``directory`` (made
+    where it is not there), of the directory and the ``files`` in it."""
+    if directory is not None:
+        problems = [writing.unwritable(directory, directory=True)]
+        problems += [f"cannot write {f}: it is a directory" for f in files if os.path.isdir(f)]
+    else:
+        problems = [writing.unwritable(f) for f in files if f is not None]
+    problem = next(filter(None, problems), None)
+    if problem is not None:
+        fail(problem)
+
+
 def single_blas_thread() -> None:
     """Ask numpy's BLAS, if this process is the one to load it, for one thread.
 
@@ -179,6 +194,7 @@ def scan(arguments: ScanArguments) -> None:
     paths = [Path(path) for path in arguments.paths]
     output = None if arguments.output is None else Path(arguments.output)
     refuse_writing_inputs([output], paths)
+    refuse_unwritable([output])
     if arguments.cache_dir is not None:
         use_cache_dir(arguments.cache_dir)
     single_blas_thread()

@@ -59,10 +59,14 @@ def _status(code: object) -> int:
 def dispatch(words: list[str]) -> int:
     """Run ``lensaudit WORDS...``, to its exit status: a plain scan here, the
     rest through the click group. Ctrl-C ends it with status 130 and
-    "interrupted" (nothing half-written is left: see :mod:`lensaudit.writing`)."""
+    "interrupted", SIGTERM with status 143 and "terminated" (nothing
+    half-written is left: see :mod:`lensaudit.writing`)."""
     try:
         return _dispatch(words)
-    except (Interrupted, KeyboardInterrupt):
+    except Interrupted as stop:
+        sys.stderr.write(f"lensaudit: {stop.message}\n")
+        return stop.status
+    except KeyboardInterrupt:
         sys.stderr.write("lensaudit: interrupted\n")
         return EXIT_INTERRUPTED
     except WriteError as error:

@@ -48,6 +48,13 @@ class TreeEntry:
     path: str
 
 
+def _why_not_run(error: OSError) -> str:
+    """Why git could not be started, in words for the user."""
+    if isinstance(error, FileNotFoundError):
+        return "no git command on PATH"
+    return f"git: {error.strerror or error}"
+
+
 def _environment() -> dict[str, str]:
     return {**os.environ, **ENVIRONMENT}
 
@@ -69,7 +76,7 @@ def run(repository: str | os.PathLike[str], *arguments: str, stdin: bytes | None
             env=_environment(),
         )
     except OSError as error:
-        raise GitUnavailable(error.strerror or str(error)) from None
+        raise GitUnavailable(_why_not_run(error)) from None
     if completed.returncode != 0:
         lines = completed.stderr.decode("utf-8", "replace").strip().splitlines()
         raise GitError(lines[-1] if lines else f"git {arguments[0]} failed")
@@ -157,7 +164,7 @@ def _cat_file(repository: str | os.PathLike[str]) -> subprocess.Popen[bytes]:
             env=_environment(),
         )
     except OSError as error:
-        raise GitUnavailable(error.strerror or str(error)) from None
+        raise GitUnavailable(_why_not_run(error)) from None
 
 
 def objects(

@@ -2,17 +2,23 @@
 command's files appear all together or not at all, and a file patched in
 place keeps its mode, owner and group.
 
-Every file is first written to a temporary file beside it, then renamed
-over its name (:class:`OutputSet`); the renames of a set are done with
-SIGINT held back, so that Ctrl-C leaves either every file of the set or
-none of it, and the old files in place. An interrupted command ends with
-:class:`Interrupted` (exit status 130).
+Every file is first written to a temporary file beside it, named
+``.NAME.PID.N.tmp`` (the writer's process id, a number), then renamed over
+its name (:class:`OutputSet`, :func:`write_file`); the renames of a set are
+done with SIGINT and SIGTERM held back, so that Ctrl-C or ``kill`` leaves
+either every file of the set or none of it, and the old files in place.
+An interrupted command ends with :class:`Interrupted` (exit status 130 for
+SIGINT, 143 for SIGTERM), its temporary files removed; a temporary file
+left by a process that is gone (``kill -9``, a crash) is removed by the
+next run that writes into its directory. Whether the outputs can be
+written at all is asked before the work (:func:`unwritable`).
 """
 
 from __future__ import annotations
 
 import itertools
 import os
+import re
 import signal
 import stat
 import sys
@@ -27,11 +33,29 @@ if TYPE_CHECKING:
 
 #: The exit status of a command interrupted by Ctrl-C (128 + SIGINT), as shells give it.
 EXIT_INTERRUPTED = 130
+#: The exit status of a command ended by SIGTERM (128 + SIGTERM), as shells give it.
+EXIT_TERMINATED = 143
 
 
 class Interrupted(BaseException):
-    """Ctrl-C, raised in place of KeyboardInterrupt so that click does not turn
-    it into "Aborted!" and exit status 1 (see :func:`catch_interrupts`)."""
+    """Ctrl-C (SIGINT) or SIGTERM, raised in place of KeyboardInterrupt so that
+    click does not turn it into "Aborted!" and exit status 1, and so that a
+    SIGTERM unwinds as Ctrl-C does, removing temporary files (see
+    :func:`catch_interrupts`)."""
+
+    def __init__(self, signum: int = signal.SIGINT) -> None:
+        super().__init__(signum)
+        self.signum = int(signum)
+
+    @property
+    def status(self) -> int:
+        """The exit status: 130 for SIGINT, 143 for SIGTERM (128 + the signal)."""
+        return 128 + self.signum
+
+    @property
+    def message(self) -> str:
+        """What the command says as it ends."""
+        return "terminated" if self.signum == signal.SIGTERM else "interrupted"
 
 
 class WriteError(OSError):
@@ -47,13 +71,14 @@ class WriteError(OSError):
 
 
 def catch_interrupts() -> None:
-    """Make Ctrl-C raise :class:`Interrupted` in this process (and in the
-    processes it forks)."""
+    """Make Ctrl-C (SIGINT) and SIGTERM raise :class:`Interrupted` in this
+    process (and in the processes it forks)."""
 
     def interrupted(signum: int, frame: Any) -> None:
-        raise Interrupted
+        raise Interrupted(signum)
 
-    signal.signal(signal.SIGINT, interrupted)
+    for each in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(each, interrupted)
 
 
 def output_in_input(
@@ -85,6 +110,61 @@ def _same_file(first: Path, second: Path) -> bool:
 
 #: Numbers for temporary files, unique in this process.
 _NUMBERS = itertools.count()
+#: The name of a temporary file of lensaudit's: .NAME.PID.N.tmp
+_TEMPORARY = re.compile(r"\..+\.(?P<pid>[0-9]+)\.[0-9]+\.tmp")
+#: The directories whose abandoned temporary files this process has removed.
+_SWEPT: set[str] = set()
+
+
+def temporary_beside(path: Path) -> Path:
+    """A new name for a temporary file that will become ``path``, beside it:
+    ``.NAME.PID.N.tmp``, hidden, with this process's id."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{next(_NUMBERS)}.tmp")
+
+
+def writer_of(name: str) -> int | None:
+    """The process id in the name of one of lensaudit's temporary files
+    (:func:`temporary_beside`); None for any other name."""
+    found = _TEMPORARY.fullmatch(name)
+    return int(found["pid"]) if found else None
+
+
+def running(pid: int) -> bool:
+    """Whether the process ``pid`` exists (another user's included): signal 0
+    asks without sending anything."""
+    if pid == os.getpid() or pid <= 0:  # <= 0 names a group, never asked: kept
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process (PermissionError), or cannot tell: kept
+        return True
+    return True
+
+
+def remove_abandoned(directory: str | os.PathLike[str]) -> None:
+    """Remove the temporary files of lensaudit (:func:`temporary_beside`'s
+    names, no other) in ``directory`` whose process is gone: left by a run
+    killed with SIGKILL, or by a crash. Those of a running process, another
+    run writing there now, are kept. Each directory once per process."""
+    key = os.path.realpath(directory)
+    if key in _SWEPT:
+        return
+    _SWEPT.add(key)
+    try:
+        entries = list(os.scandir(key))
+    except OSError:
+        return
+    for entry in entries:
+        pid = writer_of(entry.name)
+        if pid is None or running(pid):
+            continue
+        try:
+            if entry.is_file(follow_symlinks=False):
+                os.unlink(entry.path)
+        except OSError:
+            pass
 
 
 class OutputSet:
@@ -118,14 +198,17 @@ class OutputSet:
             mode = None  # not there yet (or unreadable: opening it will say)
         if mode is not None and not stat.S_ISREG(mode):
             return str(final)
-        temporary = str(final.with_name(f".{final.name}.{os.getpid()}.{next(_NUMBERS)}.tmp"))
-        try:
-            descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except OSError as error:
-            reason = error.strerror or str(error)
-            raise WriteError(f"cannot write {path}: {reason}", reason) from None
+        remove_abandoned(final.parent)
+        temporary = str(temporary_beside(final))
+        # Made and staged together: an interruption after it is made removes it.
+        with _signals_held():
+            try:
+                descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            except OSError as error:
+                reason = error.strerror or str(error)
+                raise WriteError(f"cannot write {path}: {reason}", reason) from None
+            self._staged.append((temporary, final))
         os.close(descriptor)
-        self._staged.append((temporary, final))
         if mode is not None:  # a file replaced keeps its permissions
             os.chmod(temporary, stat.S_IMODE(mode))
         return temporary
@@ -166,13 +249,36 @@ class OutputSet:
         self._staged = []
 
     def discard(self) -> None:
-        """Remove every temporary file: nothing of the set is written."""
-        for temporary, _ in self._staged:
-            try:
-                os.unlink(temporary)
-            except OSError:
-                pass
-        self._staged = []
+        """Remove every temporary file: nothing of the set is written (a second
+        Ctrl-C or SIGTERM waits until they are removed)."""
+        with _signals_held():
+            for temporary, _ in self._staged:
+                try:
+                    os.unlink(temporary)
+                except OSError:
+                    pass
+            self._staged = []
+
+
+def write_file(path: str | os.PathLike[str], data: bytes) -> None:
+    """Replace the file ``path`` with ``data``: written to a temporary file
+    beside it (:func:`temporary_beside`) and renamed over it, so that a
+    reader sees the old content or the new. The temporary file is removed
+    whatever ends the writing (an OSError, Ctrl-C, SIGTERM), which is raised
+    again as it came. For lensaudit's own files (the cache): no link is
+    followed, no abandoned file removed."""
+    final = Path(path)
+    temporary = temporary_beside(final)
+    try:
+        with open(temporary, "xb") as stream:
+            stream.write(data)
+        os.replace(temporary, final)
+    except BaseException:
+        try:
+            os.unlink(temporary)
+        except OSError:
+            pass
+        raise
 
 
 @contextmanager
@@ -187,6 +293,57 @@ def _signals_held() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
+def unwritable(path: str | os.PathLike[str], directory: bool = False) -> str | None:
+    """Why ``path`` cannot be written, as one line naming it; None if it can.
+
+    A file is written into its directory, which must be there (``-`` is
+    standard output; a device or a pipe is written as it is); with
+    ``directory``, ``path`` is a directory that files are written into,
+    made with its parents where it is not there. Asked before any work, of
+    the kernel: a temporary file is made and removed in the directory that
+    would receive the files (or the nearest one there, for a directory to be
+    made), so that a read-only file system, access control lists and root
+    without the capability to override permissions answer as they will.
+    """
+    if str(path) == "-":
+        return None
+    try:
+        real = Path(os.path.realpath(path))
+    except (OSError, ValueError) as error:
+        return f"cannot write {path}: {getattr(error, 'strerror', None) or error}"
+    if directory:
+        if os.path.lexists(real) and not os.path.isdir(real):
+            return f"cannot write into {path}: not a directory"
+        receiving = real
+        while not os.path.lexists(receiving) and receiving != receiving.parent:
+            receiving = receiving.parent  # the directories from here down are made
+    else:
+        if os.path.isdir(real):
+            return f"cannot write {path}: it is a directory"
+        if os.path.lexists(real) and not os.path.isfile(real):
+            return None  # a device or a pipe: written as it is, not replaced
+        receiving = real.parent
+        if not os.path.lexists(receiving):
+            return f"cannot write {path}: no directory {receiving}"
+    if not os.path.isdir(receiving):
+        return f"cannot write {path}: {receiving} is not a directory"
+    problem = _cannot_make_files_in(receiving)
+    return f"cannot write {path}: {problem}" if problem else None
+
+
+def _cannot_make_files_in(directory: Path) -> str | None:
+    """Why no file can be made in ``directory``; None if one can (one is made
+    and removed, with the signals held so that none is left)."""
+    temporary = temporary_beside(directory / "lensaudit")
+    try:
+        with _signals_held():
+            os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+            os.unlink(temporary)
+    except OSError as error:
+        return error.strerror or str(error)
+    return None
 
 
 @contextmanager
@@ -228,6 +385,14 @@ def replace_files(contents: list[tuple[str | os.PathLike[str], bytes]]) -> None:
                 ) from None
 
 
+def check_replaceable(names: Iterable[str | os.PathLike[str]]) -> None:
+    """Raise :class:`WriteError` for the first of ``names`` that
+    :func:`replace_files` would refuse (one this user may not write, that
+    is not a regular file, or has other hard links), before any work."""
+    for name in names:
+        _writable(name, Path(os.path.realpath(name)))
+
+
 def _writable(name: str | os.PathLike[str], target: Path) -> os.stat_result:
     """The status of a file to be replaced; WriteError if it may not be."""
     problem = ""
@@ -237,6 +402,10 @@ def _writable(name: str | os.PathLike[str], target: Path) -> os.stat_result:
             # Opened for writing (not truncated): the kernel's own answer, for
             # root without the capability to override permissions too.
             os.close(os.open(target, os.O_WRONLY | os.O_NONBLOCK))
+            # Its new content is written beside it, and renamed over it.
+            reason = _cannot_make_files_in(target.parent)
+            if reason:
+                problem = f"{reason} (in its directory {target.parent})"
         else:
             problem = "not a regular file"
     except OSError as error:

@@ -20,6 +20,7 @@ from .options import (
     fail,
     output_file,
     output_stream,
+    refuse_unwritable,
     refuse_writing_inputs,
 )
 
@@ -127,6 +128,7 @@ def check(
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
     baselines = [baseline] if baseline is not None and os.path.exists(baseline) else []
     refuse_writing_inputs([output], paths, *baselines)
+    refuse_unwritable([output])
     with cycle_collector_off():
         result = _run(paths, baseline, margin, verbose, output_format, cache)
         with output_stream(output) as stream:

@@ -17,7 +17,7 @@ from ..pipeline import run
 from ..read import LoadError
 from ..read.paths import in_bundled_database
 from ..version import __version__
-from ..writing import WriteError
+from ..writing import WriteError, check_replaceable
 from ..xmlpatch import PatchError, unified_diff
 from ..xmlpatch import write as write_patches
 from .options import (
@@ -28,6 +28,7 @@ from .options import (
     format_option,
     output_file,
     output_stream,
+    refuse_unwritable,
     refuse_writing_inputs,
 )
 
@@ -138,7 +139,10 @@ def fix(
 
     _check_options(target, margin, tolerance)
     refuse_writing_inputs([output], paths)
+    refuse_unwritable([output])
     audit = _read_audit(paths, cache, write)
+    if write:
+        _refuse_unwritable_targets(audit, margin, lens, focal)
     results, patches = _refit(audit, margin, target, tolerance, lens, focal)
     written = _write_patches(patches) if write else []
     diff = "" if write else "".join(unified_diff(p) for p in patches)
@@ -180,6 +184,24 @@ def _read_audit(paths: tuple[Path, ...], cache: bool, write: bool) -> Audit:
             "lensfunpy, which is not written; patch a copy of it instead"
         )
     return audit
+
+
+def _refuse_unwritable_targets(
+    audit: Audit, margin: float, lens: str | None, focal: float | None
+) -> None:
+    """Exit with status 2, before the refits, when a file that --write may
+    patch (one holding an entry selected) cannot be replaced as
+    :func:`lensaudit.writing.replace_files` replaces it."""
+    from .. import fix as stage  # numpy: --help stays quick
+
+    paths = {f.name: f.path for f in audit.files}
+    names = {
+        audit.entries[i].file for i in stage.select(audit, margin=margin, lens=lens, focal=focal)
+    }
+    try:
+        check_replaceable(paths[name] for name in sorted(names) if name in paths)
+    except WriteError as error:
+        fail(str(error))
 
 
 def _refit(

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from ..commands import cycle_collector_off, refuse_writing_inputs
+from ..commands import cycle_collector_off, refuse_unwritable, refuse_writing_inputs
 from ..history import Commit, HistoryError, Revision, audit_history, trend_figure
 from ..history.commits import normalized_path
 from ..history.index import caches, key_of
@@ -98,6 +98,7 @@ def history(
     """
     repository = repository if repository is not None else _checkout()
     refuse_writing_inputs([output_dir], [repository / db_path], repository / ".git")
+    refuse_unwritable([output_dir / name for name in _WRITTEN], output_dir)
     try:
         output_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -187,6 +188,8 @@ def _title(repository: Path, db_path: str, first_parent: bool, newest: Commit) -
 
 
 _FIGURES = ("trend.png", "trend.svg")
+#: Every file written into DIR.
+_WRITTEN = ("history.csv", "introduced.csv", "events.csv", *_FIGURES)
 
 
 def _figures(

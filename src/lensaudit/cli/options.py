@@ -16,6 +16,7 @@ from ..commands import (
     FORMAT_NAMES,
     fail,
     output_stream,
+    refuse_unwritable,
     refuse_writing_inputs,
     use_cache_dir,
 )
@@ -32,6 +33,7 @@ __all__ = [
     "output_file",
     "output_stream",
     "not_blank",
+    "refuse_unwritable",
     "refuse_writing_inputs",
 ]
 

@@ -12,7 +12,14 @@ import click
 from ..pipeline import run
 from ..read import LoadError
 from ..writing import OutputSet
-from .options import EXIT_INPUT_ERROR, GivenPath, cache_option, fail, refuse_writing_inputs
+from .options import (
+    EXIT_INPUT_ERROR,
+    GivenPath,
+    cache_option,
+    fail,
+    refuse_unwritable,
+    refuse_writing_inputs,
+)
 
 if TYPE_CHECKING:
     from ..pipeline import Audit
@@ -71,6 +78,7 @@ def _check_output(output: Path, entry: str | None, databases: tuple[Path, ...]) 
     _check_format(output)
     named = (entry or "").rpartition(":")[0]
     refuse_writing_inputs([output], databases, *([named] if named and Path(named).exists() else []))
+    refuse_unwritable([output])
 
 
 def _audit(paths: list[Path] | None, cache: bool) -> Audit:
@@ -292,6 +300,7 @@ def map_command(
     fold (r_max infinite); red: r_max near 0.
     """
     _check_format(output)
+    refuse_unwritable([output])
     if not k_range[0] < k_range[1]:
         fail("--range needs MIN < MAX")
     for option, values in (("--range", k_range), ("--k3", k3_values)):

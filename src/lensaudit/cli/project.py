@@ -20,7 +20,14 @@ from .. import read
 from ..formats.csv_format import write_rows
 from ..read import LoadError, display_path
 from ..read.records import STATUS_OK
-from .options import GivenPath, fail, output_file, output_stream, refuse_writing_inputs
+from .options import (
+    GivenPath,
+    fail,
+    output_file,
+    output_stream,
+    refuse_unwritable,
+    refuse_writing_inputs,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -121,6 +128,7 @@ def project(
         )
     given = [points] if points is not None and str(points) != "-" else []
     refuse_writing_inputs([output], None if opencv else databases, *given)
+    refuse_unwritable([output])
     chosen = ""
     try:
         if opencv:

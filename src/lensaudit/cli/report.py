@@ -9,8 +9,15 @@ import click
 from ..commands import cycle_collector_off
 from ..read import LoadError
 from ..report import ReportExistsError, audit, drawing, write_report
-from ..report.writer import planned_files
-from .options import GivenPath, cache_option, database_paths, fail, refuse_writing_inputs
+from ..report.writer import check_directory, planned_files
+from .options import (
+    GivenPath,
+    cache_option,
+    database_paths,
+    fail,
+    refuse_unwritable,
+    refuse_writing_inputs,
+)
 
 
 @click.command()
@@ -61,6 +68,11 @@ def report(
     # The directory, and each file it receives: an input may be in the directory.
     outputs = [output_dir, *(output_dir / name for name in planned_files(paper))]
     refuse_writing_inputs(outputs, paths)
+    refuse_unwritable(outputs[1:], output_dir)
+    try:  # report files in DIR without --force: refused before the work, not after
+        check_directory(output_dir, planned_files(paper), force)
+    except ReportExistsError as error:
+        fail(str(error))
     values = None
     if paper:
         # numpy: `report --help` imports no heavy module (tests/test_imports.py)

@@ -42,6 +42,11 @@ class Commit:
         return self.hash[:7]
 
 
+def _unavailable(error: gitlayer.GitUnavailable) -> str:
+    """The line that says git cannot be run at all (not installed, say)."""
+    return f"cannot run git to read the history: {error}"
+
+
 class Git:
     """One repository, read through :mod:`lensaudit.git`; git's failures as
     :class:`HistoryError`."""
@@ -55,8 +60,12 @@ class Git:
             problem = "not a directory" if self.repository.exists() else "no such directory"
             raise HistoryError(f"{repository}: {problem}")
         try:
-            found = self.run("rev-parse", "--git-path", "shallow", "--git-path", "info/grafts")
-        except HistoryError:
+            found = gitlayer.run(
+                self.repository, "rev-parse", "--git-path", "shallow", "--git-path", "info/grafts"
+            ).decode("utf-8", "replace")
+        except gitlayer.GitUnavailable as error:
+            raise HistoryError(_unavailable(error)) from None
+        except gitlayer.GitError:
             raise HistoryError(f"{repository}: not a git repository") from None
         #: The files that cut a history short (a shallow clone) or graft one on.
         self._boundary_files = [self.repository / line for line in found.splitlines()]
@@ -78,7 +87,7 @@ class Git:
         try:
             return gitlayer.run(self.repository, *args).decode("utf-8", "replace")
         except gitlayer.GitUnavailable as error:
-            raise HistoryError(f"cannot run git: {error}") from None
+            raise HistoryError(_unavailable(error)) from None
         except gitlayer.GitError as error:
             raise HistoryError(str(error)) from None
 
@@ -87,7 +96,7 @@ class Git:
         try:
             return gitlayer.resolve_commit(self.repository, revision)
         except gitlayer.GitUnavailable as error:
-            raise HistoryError(f"cannot run git: {error}") from None
+            raise HistoryError(_unavailable(error)) from None
         except gitlayer.GitError:
             raise HistoryError(f"{revision!r} is not a commit of {self.given}") from None
 
@@ -97,7 +106,7 @@ class Git:
         try:
             yield from gitlayer.objects(self.repository, names)
         except gitlayer.GitUnavailable as error:
-            raise HistoryError(f"cannot run git: {error}") from None
+            raise HistoryError(_unavailable(error)) from None
         except gitlayer.GitError as error:
             raise HistoryError(str(error)) from None
 
@@ -106,7 +115,7 @@ class Git:
         try:
             return gitlayer.object_sizes(self.repository, names)
         except gitlayer.GitUnavailable as error:
-            raise HistoryError(f"cannot run git: {error}") from None
+            raise HistoryError(_unavailable(error)) from None
         except gitlayer.GitError as error:
             raise HistoryError(str(error)) from None
 

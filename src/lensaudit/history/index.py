@@ -33,6 +33,7 @@ from pathlib import Path
 from .. import read
 from ..read.paths import read_descriptor, read_file
 from ..read.records import DistortionEntry
+from ..writing import remove_abandoned, write_file
 from .audit import BlobAudit, Interner
 from .commits import Commit
 from .results import COUNT_COLUMNS, FoldEvent, History, IntroducedEntry, Revision
@@ -121,25 +122,19 @@ class Index:
 
     def put(self, name: str, key: str, value: object) -> None:
         """Keep ``value`` (plain data) under ``name`` for ``key``, replacing what was there."""
-        path = self.path / name
-        temporary = path.with_name(f"{name}.{os.getpid()}.tmp")
         try:
             body = marshal.dumps((key, value))
             seal = blake2b(body, digest_size=_DIGEST_SIZE).digest()
             if self.path.is_file() and _earlier_layout(self.path):
                 self.path.unlink()
             self.path.mkdir(parents=True, exist_ok=True)
-            with open(temporary, "wb") as stream:
-                stream.write(_MAGIC + fingerprint() + seal + body)
-            os.replace(temporary, path)
+            remove_abandoned(self.path)  # left by a run killed with SIGKILL
+            # Its temporary file removed whatever ends the writing, SIGTERM included.
+            write_file(self.path / name, _MAGIC + fingerprint() + seal + body)
             for pattern in _LEGACY:
                 for stale in self.path.parent.glob(pattern):
                     stale.unlink(missing_ok=True)
         except (OSError, ValueError) as error:
-            try:
-                temporary.unlink(missing_ok=True)
-            except OSError:
-                pass
             if not self.warnings:  # one line says it
                 self.warnings.append(f"cache {self.path} not used: {error}")
 

@@ -31,10 +31,12 @@ from __future__ import annotations
 import functools
 import marshal
 import os
+import re
 import time
 from pathlib import Path
 
 from ..version import __version__
+from ..writing import running, write_file, writer_of
 from .paths import read_file
 
 # typing only for type checkers
@@ -54,6 +56,8 @@ _MAGIC = b"lensaudit record 4\n"
 _DIGEST_SIZE = 16
 _SUFFIX = ".rec"
 _ABANDONED_SECONDS = 3600  # a temporary file this old belongs to no running writer
+#: The name of a temporary record of earlier versions: RECORD.PID.tmp
+_EARLIER_TEMPORARY = re.compile(r"[^.].*\.rec\.([0-9]+)\.tmp")
 #: The sources whose output the cache keeps, relative to the package.
 _CODE = (
     "read/*.py", "normalizer.py", "solver/*.py", "metrics.py", "pipeline.py", "columns.py",
@@ -190,17 +194,21 @@ class Cache:
     def _write(self, digest: bytes) -> None:
         path = self._path(digest)
         body = _MAGIC + fingerprint() + digest + marshal.dumps(self._records[digest])
-        temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        try:
-            with open(temporary, "xb") as stream:
-                stream.write(body)
-            os.replace(temporary, path)
-        except OSError:
-            try:
-                os.unlink(temporary)
-            except OSError:
-                pass
-            raise
+        write_file(path, body)  # its temporary file removed, even on Ctrl-C or SIGTERM
+
+
+def _abandoned(name: str, age: float) -> bool:
+    """Whether the temporary file ``name``, ``age`` seconds old, is no writer's:
+    the process named in it is gone (a run killed with SIGKILL); one of an
+    earlier version's naming (RECORD.PID.tmp) is judged by its process as
+    well; any other, by its age."""
+    pid = writer_of(name)
+    if pid is None:
+        found = _EARLIER_TEMPORARY.fullmatch(name)
+        pid = int(found[1]) if found else None
+    if pid is None:
+        return age > _ABANDONED_SECONDS
+    return not running(pid)
 
 
 def evict(directory: Path, max_records: int, max_bytes: int) -> None:
@@ -216,7 +224,7 @@ def evict(directory: Path, max_records: int, max_bytes: int) -> None:
         try:
             status = entry.stat(follow_symlinks=False)
             if entry.name.endswith(".tmp"):
-                if now - status.st_mtime > _ABANDONED_SECONDS:
+                if _abandoned(entry.name, now - status.st_mtime):
                     os.unlink(entry.path)
             elif entry.name.endswith(_SUFFIX):
                 found.append((status.st_mtime_ns, status.st_size, entry.path))

@@ -170,13 +170,20 @@ def write_report(
     return written
 
 
+def check_directory(directory: str | os.PathLike[str], names: list[str], force: bool) -> None:
+    """Raise :class:`ReportExistsError` when ``directory`` holds any of ``names``
+    (report files) and ``force`` is false: asked before the work as well."""
+    directory = Path(directory)
+    existing = [n for n in names if (directory / n).exists()]
+    if existing and not force:
+        raise ReportExistsError(directory, existing)
+
+
 def _prepare_directory(directory: Path, names: list[str], force: bool) -> None:
     """Create ``directory``; refuse one that holds any of ``names``, unless ``force``."""
     if directory.exists() and not directory.is_dir():
         raise NotADirectoryError(f"{directory} exists and is not a directory")
-    existing = [n for n in names if (directory / n).exists()]
-    if existing and not force:
-        raise ReportExistsError(directory, existing)
+    check_directory(directory, names, force)
     directory.mkdir(parents=True, exist_ok=True)
 
 
