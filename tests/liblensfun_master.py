@@ -44,8 +44,18 @@ from typing import NamedTuple
 
 import pytest
 
+
+def _shared() -> Path:
+    """``shared/`` beside the repository, or beside the directory of its worktrees."""
+    repository = Path(__file__).resolve().parents[1]
+    for base in (repository.parent, repository.parent.parent):
+        if (base / "shared" / "data").is_dir():
+            return base / "shared"
+    return repository.parent / "shared"
+
+
 #: ``shared/`` beside the repository: the source tarball and its build script.
-SHARED = Path(__file__).resolve().parents[2] / "shared"
+SHARED = _shared()
 SOURCE_TARBALL = SHARED / "data" / "lensfun-src-1c8b8f07.tar.gz"
 BUILD_SCRIPT = SHARED / "tools" / "build-liblensfun.sh"
 
