@@ -587,3 +587,23 @@ def test_a_baseline_file_the_change_left_alone_is_not_analysed_again(tmp_path, m
     assert sorted(analysed) == ["changed.xml", "changed.xml", "same.xml"]
     assert ("fold-in-image", True) in [(f.code, f.known) for f in result.findings]
     assert all(f.known for f in result.findings) and result.resolved == 0
+
+
+def test_every_finding_code_is_in_check_help_and_in_the_codes_table_of_ci_md():
+    import re
+
+    from click.testing import CliRunner
+
+    from lensaudit.check import result as results
+    from lensaudit.cli import main
+
+    codes = {
+        value
+        for name, value in vars(results).items()
+        if name.isupper() and isinstance(value, str) and re.fullmatch(r"[a-z]+(-[a-z]+)+", value)
+    }
+    assert {"encoding-mismatch", "liblensfun-refuses", "xml-error"} <= codes
+    shown = CliRunner().invoke(main, ["check", "--help"]).output
+    table = (Path(__file__).resolve().parents[1] / "docs" / "ci.md").read_text(encoding="utf-8")
+    assert sorted(c for c in codes if c not in shown) == []
+    assert sorted(c for c in codes if f"| `{c}` |" not in table) == []

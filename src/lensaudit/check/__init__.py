@@ -23,6 +23,9 @@ sentence. Errors make the check fail; warnings and notices do not.
   ``liblensfun-refuses`` (Lensfun master's liblensfun stops loading the file
   there and loses the lenses after it; see :mod:`lensaudit.check.loading`;
   not repeated for a file that is ``xml-error`` at that spot).
+- ``encoding-mismatch`` (warning): the file's XML declaration names an
+  encoding its bytes are not in; liblensfun reads them as UTF-8, as lensaudit
+  does, a reader that follows the declaration reads other names.
 - Vignetting and TCA (see :mod:`lensaudit.vignetting` and :mod:`lensaudit.tca`):
   ``vignetting-zero-in-image`` (error) when the correction's C(r) reaches 0
   inside the image, ``vignetting-low-in-image`` (warning) when it falls below
@@ -107,6 +110,7 @@ from .result import (
     DEFAULT_MARGIN,
     DUPLICATE_FOCAL,
     DUPLICATE_LENS,
+    ENCODING_MISMATCH,
     FILE_CODES,
     FOCAL_SERIES_OUTLIER,
     FOLD_BETWEEN_CALIBRATIONS,
@@ -171,6 +175,7 @@ __all__ = [
     "DEFAULT_MARGIN",
     "DUPLICATE_FOCAL",
     "DUPLICATE_LENS",
+    "ENCODING_MISMATCH",
     "FILE_CODES",
     "FOCAL_SERIES_OUTLIER",
     "FOLD_BETWEEN_CALIBRATIONS",

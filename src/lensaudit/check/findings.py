@@ -35,7 +35,7 @@ from .between import folds_between
 from .duplicates import Known, duplicate_focals, duplicate_lenses
 from .inputs import Source
 from .inversion import inversion_findings
-from .loading import liblensfun_refusals
+from .loading import encoding_mismatches, liblensfun_refusals
 from .matching import calibration_content, entry_content, file_identified, lens_identity
 from .metadata import conflicting_calibrations, starting_values, undefined_mounts
 from .parsing import ParsedSource, parse_sources
@@ -117,6 +117,7 @@ def analyse_parsed(
         """The findings of the rules that look across files, as plain data."""
         found = [*duplicate_lenses(read, known), *undefined_mounts(read)]
         found += [(i, item) for i, file in enumerate(read) for item in liblensfun_refusals(file)]
+        found += [(i, item) for i, file in enumerate(read) for item in encoding_mismatches(file)]
         return [(index, _plain(item)) for index, item in found]
 
     for index, file in enumerate(read):

@@ -1,5 +1,6 @@
-"""``liblensfun-refuses``: the first spot of a file where Lensfun master's
-liblensfun stops loading it.
+"""What Lensfun master's liblensfun makes of a file: ``liblensfun-refuses``,
+the first spot where it stops loading it, and ``encoding-mismatch``, a file
+it reads as UTF-8 whose XML declaration says otherwise.
 
 The reader records that spot (:attr:`lensaudit.read.FileTables.refusal`,
 judged by :mod:`lensaudit.read.liblensfun`): an element, attribute or value
@@ -19,6 +20,14 @@ says what is wrong with the entry, not that liblensfun drops the file from
 there on: the refusal is reported beside it, with the lenses lost. The
 finding is matched against a baseline by the file's name and the reason,
 not by its line.
+
+liblensfun (GLib's GMarkup) reads every file as UTF-8 and takes the XML
+declaration for a processing instruction; so does the reader. A file
+declared ISO-8859-1 whose bytes are UTF-8 loads, with the names meant, but
+every reader that follows the declaration (Python's, libxml2's) reads other
+names ("GÃ¶rlitz" for "Görlitz"): ``encoding-mismatch``, a warning on the
+declaration's line. Bytes that are not UTF-8 are ``xml-error``, as GMarkup
+refuses them.
 """
 
 from __future__ import annotations
@@ -28,9 +37,11 @@ from collections.abc import Iterable
 from ..read.liblensfun import NOT_WELL_FORMED
 from .parsing import ParsedSource
 from .result import (
+    ENCODING_MISMATCH,
     LIBLENSFUN_REFUSES,
     NOT_A_DATABASE,
     SEVERITY_ERROR,
+    SEVERITY_WARNING,
     UNREADABLE,
     Finding,
     Identified,
@@ -61,8 +72,24 @@ def liblensfun_refusals(file: ParsedSource) -> Iterable[Identified]:
     yield Identified(finding, (identity,), (file.source.file_name,))
 
 
+def encoding_mismatches(file: ParsedSource) -> Iterable[Identified]:
+    """The ``encoding-mismatch`` finding of one file whose XML declaration
+    names an encoding its bytes are not in (see the module's description)."""
+    found = file.tables.encoding
+    if found is None:
+        return
+    line, problem = found
+    finding = Finding(
+        SEVERITY_WARNING, ENCODING_MISMATCH, file.source.display, line, 0, clip(problem)
+    )
+    # Matched by what the declaration says, not by the text it is first wrong on.
+    said = problem.partition(":")[0]
+    identity = (SEVERITY_WARNING, ENCODING_MISMATCH, file.source.file_name, said)
+    yield Identified(finding, (identity,), (file.source.file_name,))
+
+
 def _lenses(count: int) -> str:
     return f"{count} lens" if count == 1 else f"{count} lenses"
 
 
-__all__ = ["liblensfun_refusals"]
+__all__ = ["encoding_mismatches", "liblensfun_refusals"]

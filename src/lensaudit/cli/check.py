@@ -70,7 +70,9 @@ Warnings: fold-near-image (D(r_max) below MARGIN times the corner);
   neighbours in focal length predict); duplicate-lens and
   duplicate-focal when the two are identical;
   inversion-fails-in-image (liblensfun's reverse transform cannot
-  invert the model by its Newton steps inside the image).
+  invert the model by its Newton steps inside the image);
+  encoding-mismatch (the XML declaration names an encoding the
+  bytes are not in: liblensfun reads UTF-8, other readers follow it).
 Notices: baseline-unreadable (how a baseline file that cannot be parsed
   was replaced).
 Notices with --verbose: fold-outside-image (any other finite r_max),
