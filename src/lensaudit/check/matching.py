@@ -16,7 +16,6 @@ from dataclasses import fields, replace
 from .. import read as reader
 from ..read.records import STATUS_OK, DistortionEntry
 from .inputs import last_readable
-from .loading import liblensfun_refusals
 from .parsing import LensRecord, ParsedSource, parse_sources
 from .result import (
     BASELINE_UNREADABLE,
@@ -28,6 +27,7 @@ from .result import (
     none_if_nan,
     normalized_name,
 )
+from .rules.liblensfun_refuses import liblensfun_refusals
 
 
 def identity_name(text: str) -> str:

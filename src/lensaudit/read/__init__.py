@@ -280,7 +280,8 @@ def _parsed_values(
     stored = (parsed.status, parsed.line, parsed.column, parsed.error, parsed.problem,
               found.lenses, distortion, lens_of_row, omitted, found.cameras,
               found.mount_names,
-              _refusal(data, parsed, found) if refusals else NOT_JUDGED)  # fmt: skip
+              _refusal(data, parsed, found) if refusals else NOT_JUDGED,
+              xml.encoding_disagreement(data))  # fmt: skip
     if not calibrations:
         return stored, None
     return stored, (vignetting, tca, lens_of_vignetting, lens_of_tca)
@@ -291,10 +292,12 @@ def _refusal(data: bytes, parsed: xml.Parsed, found: FileReader) -> tuple[int, s
     then (see :attr:`FileTables.refusal`)."""
     from . import liblensfun  # only what is judged needs its rules
 
-    # libxml2 has read a well-formed document as UTF-8 unless it declares another encoding.
-    utf8_checked = parsed.status == STATUS_OK and not xml.declares_other_encoding(data)
+    # libxml2 has read a well-formed document as UTF-8 unless it was decoded first.
+    utf8_checked = parsed.status == STATUS_OK and xml.decoded(data) is data
     leading = liblensfun.leading_refusal(data, utf8_checked)
-    refusal = (*leading, 0) if leading is not None else found.first_refusal()
+    refusal = found.first_refusal()
+    if leading is not None and (refusal is None or leading[0] <= refusal[0]):
+        refusal = leading
     if parsed.status == xml.STATUS_XML_ERROR and (refusal is None or refusal[0] >= parsed.line):
         # What comes first is the markup itself (GMarkup refuses it too).
         # The lenses ended before the error's position, which liblensfun holds.
@@ -317,7 +320,8 @@ def _marked(rows: list[tuple], status: str, message: str) -> list[tuple]:
 def unreadable(name: str, path: Path | None, message: str) -> FileTables:
     """The tables of a file that could not be read: one row that says why."""
     values = (STATUS_UNREADABLE, 0, 0, message, message, [],
-              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [], None)  # fmt: skip
+              [error_row(0, STATUS_UNREADABLE, message)], [None], [()], [], [],
+              None, None)  # fmt: skip
     tables = FileTables(name, path, b"", values)
     tables.set_calibrations(
         (

@@ -21,9 +21,11 @@ not accept:
   length or aperture above its maximum, or a crop factor not positive or an
   aspect ratio below 1 (``lens.cpp``); a camera without maker, model, mount
   or a positive crop factor (``camera.cpp``); a mount without a name;
-- GMarkup's own errors: a file that does not start with ``<`` (a byte-order
-  mark), bytes that are not UTF-8, and markup that is not well-formed (which
-  lensaudit reports as ``xml-error`` already).
+- GMarkup's own errors: a UTF-16 or UTF-32 file, a file that does not
+  start with ``<`` (a byte-order mark), bytes that are not UTF-8 whatever
+  the XML declaration says (GMarkup reads every file as UTF-8 and takes the
+  declaration for a processing instruction), and markup that is not
+  well-formed (which lensaudit reports as ``xml-error`` already).
 
 Lines are those GMarkup reports: where it stands when it gives up, that is
 just past the ``>`` of the start or end tag at fault, or at the ``<`` that
@@ -51,6 +53,8 @@ from __future__ import annotations
 import math
 import re
 import struct
+
+from .xml import declared_encoding, declares_other_encoding, wide_encoding
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
@@ -211,22 +215,35 @@ def stripped(text: str | None) -> str:
     return text.lstrip(_SPACE) if text else ""
 
 
-def leading_refusal(data: bytes, utf8_checked: bool = False) -> Refusal | None:
-    """Where GMarkup refuses a file before any element: one that does not
-    start with ``<`` after white space (a byte-order mark, say), or (in a
-    file that is otherwise well-formed) bytes that are not UTF-8; with
+def leading_refusal(data: bytes, utf8_checked: bool = False) -> tuple | None:
+    """(line, reason, lenses kept) where GMarkup refuses a file for its bytes,
+    whatever its elements: a UTF-16 or UTF-32 file (on its first line:
+    GMarkup reads UTF-8 only), one that does not start with ``<`` after
+    white space (a byte-order mark, say), or (in a file that is otherwise
+    well-formed) the first byte that is not UTF-8, whatever the XML
+    declaration says, where it keeps the lenses ended before; with
     ``utf8_checked``, the bytes are known to be UTF-8 already."""
+    wide = wide_encoding(data)
+    if wide is not None:
+        return 1, wide[1], 0
     start = _LEADING_SPACE.match(data).end()  # type: ignore[union-attr]
     if start < len(data) and data[start] != 0x3C:  # "<"
         line = data.count(b"\n", 0, start) + 1
         what = "a byte-order mark" if data.startswith(b"\xef\xbb\xbf") else "text"
-        return line, f"the file starts with {what}, not with an element"
+        return line, f"the file starts with {what}, not with an element", 0
     if not utf8_checked and not data.isascii():
         try:
             data.decode("utf-8")
         except UnicodeDecodeError as error:
             line = data.count(b"\n", 0, error.start) + 1
-            return line, f"byte 0x{data[error.start]:02X} is not UTF-8"
+            said = (
+                f" (the file declares {declared_encoding(data)}; liblensfun reads every "
+                f"file as UTF-8)"
+                if declares_other_encoding(data)
+                else ""
+            )
+            reason = f"byte 0x{data[error.start]:02X} is not UTF-8{said}"
+            return line, reason, data.count(b"</lens>", 0, error.start)
     return None
 
 

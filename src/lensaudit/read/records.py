@@ -170,7 +170,9 @@ class FileTables:
     whether it was.
     ``vignetting`` and ``tca`` are their rows (see
     :mod:`lensaudit.read.tables`), None until read; ``lens_of_vignetting`` and
-    ``lens_of_tca`` the lens index of each.
+    ``lens_of_tca`` the lens index of each. ``encoding`` is (line, problem)
+    where the file's XML declaration names an encoding its bytes are not in
+    (:func:`lensaudit.read.xml.encoding_disagreement`), None where it does not.
 
     ``name`` is how the file is shown, ``path`` where it is (None for a file
     read from git), ``digest`` the digest of its bytes (b"" if unreadable).
@@ -180,13 +182,14 @@ class FileTables:
         "name", "path", "digest", "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
         "refusal", "refusal_judged", "vignetting", "tca", "lens_of_vignetting", "lens_of_tca",
+        "encoding",
     )  # fmt: skip
 
     #: The fields that the cache keeps, in order (all but name, path and digest).
     STORED = (
         "status", "line", "column", "error", "problem",
         "lenses", "distortion", "lens_of_row", "omitted", "cameras", "mount_names",
-        "refusal",
+        "refusal", "encoding",
     )  # fmt: skip
 
     def __init__(self, name: str, path: object, digest: bytes, values: tuple) -> None:
@@ -196,8 +199,9 @@ class FileTables:
         (
             self.status, self.line, self.column, self.error, self.problem,
             lenses, self.distortion, self.lens_of_row, self.omitted, cameras, self.mount_names,
-            refusal,
+            refusal, encoding,
         ) = values  # fmt: skip
+        self.encoding: tuple | None = tuple(encoding) if encoding else None  # (line, problem)
         # NOT_JUDGED (False) where the reader was not asked to judge it.
         self.refusal_judged = refusal is not NOT_JUDGED
         self.refusal: tuple[int, str, int] | None = (

@@ -9,6 +9,18 @@ give such a value as empty or with the entity's text.
 
 Line numbers are those of the file: CR-only line ends count as line breaks
 (libxml2 would see one long line), and lines beyond 65,535 keep their number.
+
+Bytes that are UTF-8 are read as UTF-8, whatever the XML declaration says,
+as GMarkup reads them (liblensfun hands it the bytes, and it takes the
+declaration for a processing instruction): a file declared ISO-8859-1 whose
+bytes are UTF-8 gives the names liblensfun gives ("Görlitz", not
+"GÃ¶rlitz"), and :func:`encoding_disagreement` says where a reader that
+follows the declaration reads other text. A file liblensfun refuses for its
+encoding (UTF-16 or UTF-32, or bytes that are not UTF-8 in the encoding it
+declares) is read as its byte-order mark or declaration says, so that what
+it holds is still audited; :func:`lensaudit.read.liblensfun.leading_refusal`
+says that liblensfun reads none of it. Undeclared bytes that are not UTF-8
+make a file not well-formed.
 """
 
 from __future__ import annotations
@@ -106,6 +118,7 @@ _OPTIONS = dict(
     attribute_defaults=False,
     huge_tree=False,
     remove_pis=False,  # a processing instruction splits text, as in liblensfun
+    encoding="utf-8",  # whatever the declaration says: see decoded()
     # collect_ids is left on: lxml opens the external DTD without it (a FIFO named
     # as one would hang the run).
 )
@@ -135,7 +148,7 @@ def parse(
     """
     from lxml import etree  # lxml: only to parse XML, which a warm scan does not
 
-    data, found = _normalized(data)
+    data, found = _normalized(decoded(data))
     if found is not None:
         return _recovered(data, visitor, read, *found)
     lines = _Lines(data) if data.count(b"\n") >= _LIBXML2_LINES else None
@@ -167,7 +180,7 @@ def read_pieces(data: bytes, visitor: Callable[[], V], pieces: Pieces) -> list[A
     """The tables of each piece of a document that :func:`parse` with
     ``pieces`` reads as nothing but those pieces (see :meth:`Pieces.placed`),
     as ``visitor().taken()`` gives them, in order; None for any other."""
-    data, found = _normalized(data)
+    data, found = _normalized(decoded(data))
     return pieces.placed(data, visitor) if found is None else None
 
 
@@ -534,10 +547,136 @@ def _alone_in_root(data: bytes) -> Any:
 _ENCODING = re.compile(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([^\"']*)[\"']")
 
 
+def decoded(data: bytes) -> bytes:
+    """A document's bytes as they are parsed, as UTF-8 (see the module's
+    description): as they are where they are UTF-8 or declare no other
+    encoding; a UTF-16 or UTF-32 document, or one whose bytes are not UTF-8
+    but are in the encoding it declares, decoded as such. Line ends, and so
+    lines, are kept."""
+    wide = wide_encoding(data)
+    if wide is not None:
+        return data.decode(wide[0], "replace").encode("utf-8")
+    if not declares_other_encoding(data) or data.isascii():
+        return data
+    try:
+        data.decode("utf-8")
+        return data
+    except UnicodeDecodeError:
+        pass
+    try:
+        return data.decode(declared_encoding(data) or "utf-8").encode("utf-8")
+    except (LookupError, UnicodeDecodeError):
+        return data  # no encoding Python knows: not well-formed, as liblensfun has it
+
+
 def declares_other_encoding(data: bytes) -> bool:
     """Whether a document's XML declaration names an encoding other than UTF-8."""
     declared = _ENCODING.match(data)
     return declared is not None and declared.group(1).lower() not in (b"utf-8", b"utf8")
+
+
+def declared_encoding(data: bytes) -> str | None:
+    """The encoding a document's XML declaration names, None without one."""
+    declared = _ENCODING.match(data)
+    return declared.group(1).decode("ascii", "replace") if declared is not None else None
+
+
+def encoding_disagreement(data: bytes) -> tuple[int, str] | None:
+    """(line, problem) where a document's XML declaration names an encoding
+    its bytes (UTF-8, as liblensfun reads them) are not: a reader that
+    follows the declaration reads other text than liblensfun, or cannot read
+    the file. None where the two read the same (a declaration of ISO-8859-1
+    on a file of ASCII only, say), or where the bytes are not UTF-8 (then the
+    file is not well-formed, and its error says so)."""
+    declared = _ENCODING.match(data)
+    if declared is None or declared.group(1).lower() in (b"utf-8", b"utf8"):
+        return None
+    if wide_encoding(data) is not None:  # read as such: liblensfun's refusal says why
+        return None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    name = declared.group(1).decode("ascii", "replace")
+    try:
+        other = data.decode(name)
+    except (LookupError, UnicodeDecodeError):
+        other = None
+    if other == text:
+        return None
+    line = _line_at(text, len(data[: declared.start(1)].decode("utf-8")))
+    problem = f"the XML declaration says encoding={name!r}, but the bytes are UTF-8"
+    if other is None:
+        return line, (
+            f"{problem}: liblensfun reads them as UTF-8; a reader that follows "
+            f"the declaration cannot read the file"
+        )
+    differs = next(
+        (i for i, (a, b) in enumerate(zip(text, other, strict=False)) if a != b),
+        min(len(text), len(other)),
+    )
+    return line, (
+        f"{problem}: liblensfun reads them as UTF-8 ({_word_at(text, differs)!r} at line "
+        f"{_line_at(text, differs)}), a reader that follows the declaration "
+        f"as {_word_at(other, differs)!r}"
+    )
+
+
+def _line_at(text: str, position: int) -> int:
+    """The line of ``position`` in ``text`` (CR-only line ends counted too)."""
+    before = text[:position]
+    return before.count("\n") + before.count("\r") - before.count("\r\n") + 1
+
+
+def _word_at(text: str, position: int) -> str:
+    """The run of characters other than white space and markup around ``position``."""
+    start = position
+    while start > 0 and not text[start - 1].isspace() and text[start - 1] not in "<>\"'=":
+        start -= 1
+    end = position
+    while end < len(text) and not text[end].isspace() and text[end] not in "<>\"'=":
+        end += 1
+    word = text[start:end]
+    return word if len(word) <= 40 else word[:40] + "..."
+
+
+#: The byte-order marks of UTF-32 and UTF-16 (UTF-32's first: it starts as UTF-16LE's).
+_WIDE_MARKS = (
+    (b"\xff\xfe\x00\x00", "utf-32", "UTF-32"),
+    (b"\x00\x00\xfe\xff", "utf-32", "UTF-32"),
+    (b"\xff\xfe", "utf-16", "UTF-16"),
+    (b"\xfe\xff", "utf-16", "UTF-16"),
+)
+
+
+#: Two ASCII characters (white space, "<", "?") in UTF-32 or UTF-16 without a
+#: byte-order mark: their zero bytes tell the width and the byte order.
+_WIDE_START = re.compile(
+    rb"(?P<utf_32_le>[\x01-\x7f]\x00\x00\x00[\x01-\x7f]\x00\x00\x00)"
+    rb"|(?P<utf_32_be>\x00\x00\x00[\x01-\x7f]\x00\x00\x00[\x01-\x7f])"
+    rb"|(?P<utf_16_le>[\x01-\x7f]\x00[\x01-\x7f]\x00)"
+    rb"|(?P<utf_16_be>\x00[\x01-\x7f]\x00[\x01-\x7f])"
+)
+
+
+def wide_encoding(data: bytes) -> tuple[str, str] | None:
+    """(Python's codec, the problem) of a document in UTF-16 or UTF-32, by its
+    byte-order mark or, without one, by the zero bytes of its first
+    character (``<`` or white space, as XML's appendix F guesses encodings);
+    None for any other. liblensfun reads UTF-8 only, and refuses such a file
+    on its first line."""
+    marked = [(m, c, n) for m, c, n in _WIDE_MARKS if data.startswith(m)]
+    if marked:
+        mark, codec, name = marked[0]
+        how = f"byte-order mark {mark.hex(' ').upper()}"
+    else:
+        found = _WIDE_START.match(data)
+        if found is None:
+            return None
+        codec = found.lastgroup.replace("_", "-")  # type: ignore[union-attr]
+        name = codec.upper().replace("-LE", "LE").replace("-BE", "BE")
+        how = "no byte-order mark"
+    return codec, f"the file is {name} ({how}), and liblensfun reads UTF-8 only"
 
 
 def _relative_line(element: Any) -> int:
@@ -806,8 +945,15 @@ def syntax_error(data: bytes, error: Exception) -> tuple[int, int, str]:
         try:
             data.decode("utf-8")
         except UnicodeDecodeError as decode_error:
+            declared = declared_encoding(data)
+            said = (
+                f": liblensfun reads every file as UTF-8, whatever its declaration says"
+                f" ({declared})"
+                if declared is not None and declared.lower() not in ("utf-8", "utf8")
+                else "; Lensfun database files are UTF-8"
+            )
             text += (
                 f" (byte 0x{data[decode_error.start]:02X} at offset {decode_error.start}"
-                f" is not UTF-8; Lensfun database files are UTF-8)"
+                f" is not UTF-8{said})"
             )
     return line, column, text
