@@ -376,18 +376,24 @@ def matching(
     audit: Audit, indices: Sequence[int], *, lens: str | None = None, focal: float | None = None
 ) -> list[int]:
     """Those of ``indices`` whose entry matches: ``lens`` "maker lens" as a
-    case-insensitive substring, ``focal`` the calibrated focal length in
-    millimetres."""
+    substring, ignoring case and with runs of white space as one space (as
+    ``lensaudit check`` suggests the command), ``focal`` the calibrated focal
+    length in millimetres."""
     chosen = []
-    needle = lens.casefold() if lens else None
+    needle = _spaced(lens) if lens else None
     for index in indices:
         entry = audit.entries[index]
-        if needle is not None and needle not in f"{entry.maker} {entry.lens}".casefold():
+        if needle is not None and needle not in _spaced(f"{entry.maker} {entry.lens}"):
             continue
         if focal is not None and not math.isclose(entry.focal, focal, rel_tol=1e-9):
             continue
         chosen.append(index)
     return chosen
+
+
+def _spaced(text: str) -> str:
+    """``text`` without case, runs of white space as one space."""
+    return " ".join(text.split()).casefold()
 
 
 def _matches(entry: DistortionEntry) -> Any:
