@@ -48,13 +48,13 @@ def test_the_suggested_lens_name_survives_a_posix_shell(name):
 #: Lens names a shell or a one-line message could mangle.
 AWKWARD = [
     "Sigma 17-35mm F2.8-4 EX DG  Aspherical HSM",  # two spaces (slr-sigma.xml)
-    "It's a \"quoted\" lens",
+    'It\'s a "quoted" lens',
     "Price $HOME ${PATH} $(id)",
     "Back `id` tick",
     "-leading dash",
     "Ünïcödé 鏡頭 12mm",
     "Tab\there and   many spaces",
-    "=HYPERLINK(\"http://x\") ; rm -rf / #",
+    '=HYPERLINK("http://x") ; rm -rf / #',
     "A very long name " + "that goes on " * 12 + "and on",
 ]
 
