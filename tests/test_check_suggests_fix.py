@@ -8,6 +8,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 
 import pytest
 from click.testing import CliRunner
@@ -22,7 +23,7 @@ def test_every_fold_in_the_image_names_a_fix_command_that_selects_it(bundled_db)
     folds = [f for f in json.loads(checked.output)["findings"] if f["code"] == "fold-in-image"]
     assert folds
     for finding in folds:
-        command = re.search(r"`(lensaudit fix [^`]+)` refits it", finding["message"]).group(1)
+        command = _suggested(finding["message"])
         arguments = shlex.split(command)[1:] + [str(bundled_db), "--format", "json"]
         fixed = CliRunner().invoke(main, arguments)
         assert fixed.exit_code == 0, fixed.output
@@ -34,7 +35,7 @@ def test_every_fold_in_the_image_names_a_fix_command_that_selects_it(bundled_db)
 def test_the_suggested_lens_name_survives_a_posix_shell(name):
     entry = DistortionEntry("x.xml", 1, "Maker", name, (), "rectilinear", 1.0, 1.5, "ptlens", 11.0)
     command = re.search(
-        r"`lensaudit fix --lens (.+) --focal 11` refits it", check._fix_suggestion(entry)
+        r"`lensaudit fix --lens (.+) --focal 11` refits it$", check._fix_suggestion(entry)
     )
     if shutil.which("bash") is None:
         pytest.skip("no bash to judge the quoting")
@@ -42,3 +43,75 @@ def test_the_suggested_lens_name_survives_a_posix_shell(name):
         ["bash", "-c", f"printf %s {command.group(1)}"], capture_output=True, text=True, check=True
     ).stdout
     assert echoed == name
+
+
+#: Lens names a shell or a one-line message could mangle.
+AWKWARD = [
+    "Sigma 17-35mm F2.8-4 EX DG  Aspherical HSM",  # two spaces (slr-sigma.xml)
+    'It\'s a "quoted" lens',
+    "Price $HOME ${PATH} $(id)",
+    "Back `id` tick",
+    "-leading dash",
+    "Ünïcödé 鏡頭 12mm",
+    "Tab\there and   many spaces",
+    '=HYPERLINK("http://x") ; rm -rf / #',
+    "A very long name " + "that goes on " * 12 + "and on",
+]
+
+
+def _awkward_database(tmp_path):
+    lenses = "".join(
+        f"""    <lens>
+        <maker>Odd</maker>
+        <model>{name.replace("&", "&amp;").replace("<", "&lt;")}</model>
+        <mount>Odd Mount</mount>
+        <cropfactor>1.5</cropfactor>
+        <calibration>
+            <distortion model="ptlens" focal="{11 + index}" a="-0.024" b="-0.002" c="0.005"/>
+        </calibration>
+    </lens>
+"""
+        for index, name in enumerate(AWKWARD)
+    )
+    path = tmp_path / "db" / "odd.xml"
+    path.parent.mkdir()
+    path.write_text(f'<lensdatabase version="2">\n{lenses}</lensdatabase>\n', encoding="utf-8")
+    return path
+
+
+def _suggested(message: str) -> str:
+    """The command a finding's message ends with (names may hold backticks)."""
+    start = message.rindex("`lensaudit fix ")
+    end = message.rindex("` refits it")
+    return message[start + 1 : end]
+
+
+def _check(path, output_format: str) -> dict[int, str]:
+    """The fold findings' messages of ``lensaudit check`` as a process, by line."""
+    checked = subprocess.run(
+        [sys.executable, "-m", "lensaudit", "check", str(path), "--format", output_format],
+        capture_output=True, text=True, encoding="utf-8", check=False,
+    )  # fmt: skip
+    assert checked.returncode == 1, checked.stderr
+    if output_format == "json":
+        findings = json.loads(checked.stdout)["findings"]
+        return {f["line"]: f["message"] for f in findings if f["code"] == "fold-in-image"}
+    found = re.findall(r"odd\.xml:(\d+): error \[fold-in-image\] (.*)", checked.stdout)
+    return {int(line): message for line, message in found}
+
+
+def test_each_suggested_command_pasted_into_a_shell_selects_its_entry(tmp_path):
+    path = _awkward_database(tmp_path)
+    commands = {line: _suggested(m) for line, m in _check(path.parent, "text").items()}
+    assert len(commands) == len(AWKWARD)
+    assert commands == {line: _suggested(m) for line, m in _check(path.parent, "json").items()}
+    for line, command in commands.items():
+        words = shlex.split(command)
+        assert words[:2] == ["lensaudit", "fix"], command
+        fixed = subprocess.run(
+            [sys.executable, "-m", "lensaudit", *words[1:], str(path.parent), "-f", "json"],
+            capture_output=True, text=True, encoding="utf-8", check=False,
+        )  # fmt: skip
+        assert fixed.returncode == 0, (command, fixed.stderr)
+        selected = [(e["file"], e["line"]) for e in json.loads(fixed.stdout)["entries"]]
+        assert selected == [("odd.xml", line)], command

@@ -536,7 +536,6 @@ def test_writing_the_bundled_database_by_its_path_is_refused(runner, tmp_path, m
         ('<distortion model="poly3" focal="10" k1="1e308"/>', []),
         ('<distortion model="ptlens" focal="11" a="1e308" b="-0.002" c="0.005"/>', []),
         ('<distortion model="poly3" focal="16" k1="-0.11"/>', ["--margin", "1e308"]),
-        ('<distortion model="poly3" focal="16" k1="-0.11"/>', ["--target", "1e308"]),
     ],
 )
 def test_values_near_the_largest_double_are_no_solution_without_a_warning(
@@ -558,6 +557,26 @@ def test_values_near_the_largest_double_are_no_solution_without_a_warning(
     (entry,) = json.loads(found["json"])["entries"]
     assert entry["status"] == "no_solution"
     assert "no_solution" in found["table"]
+
+
+def test_a_target_near_the_largest_double_gets_the_model_that_never_folds(runner, tmp_path):
+    # A refit valid for r = inf is valid for any finite target, however large.
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "one.xml").write_text(
+        lens_xml('<distortion model="poly3" focal="16" k1="-0.11"/>')
+    )
+    found = {}
+    for target in ("1e308", "inf"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            result = runner.invoke(
+                main, ["fix", str(tmp_path / "db"), "-f", "csv", "--target", target]
+            )
+        assert result.exit_code == 0, result.output
+        (found[target],) = csv.DictReader(io.StringIO(result.output))
+    assert found["1e308"]["status"] != "no_solution"
+    assert found["1e308"]["k1_new"] == found["inf"]["k1_new"] != ""
+    assert float(found["1e308"]["r_max_after"]) == math.inf
 
 
 def test_the_command_prints_a_diff_and_writes_nothing(runner, tmp_path):

@@ -26,16 +26,19 @@ Method. D is linear in each model's coefficients,
     poly3   D = r + k1 (r^3 - r)
     poly5   D = r + k1 r^3 + k2 r^5
 
-so for a radius T >= target the fit is a linear program on grids: minimize t
+so for radii R and T the fit is a linear program on grids: minimize t
 subject to |D_new(r) - D_old(r)| <= t over [0, r_corner], D_new'(r) >=
-SLOPE_FLOOR over [0, T] and D_new(T) >= margin x r_corner (scipy's HiGHS).
-T itself is searched. The result is verified with the exact r_max solver
-(:mod:`lensaudit.metrics`); where the grid let a fold through, points are
-added where D' is smallest and the program solved again. The coefficients
-are then rounded to the decimals the file uses for the entry (at least five
-significant digits) and verified again, with one more digit where rounding
-broke them. For an infinite target, D' >= SLOPE_FLOOR is imposed on all of
-[0, inf) through the substitution r = s / (1 - s), s in [0, 1].
+SLOPE_FLOOR over [0, R], D_new(R) >= margin x r_corner, and D_new' > 0 over
+[R, T] (scipy's HiGHS), the slopes imposed through r = s / (1 - s), so that
+T may be inf. R is searched without regard to the target; T runs over a
+fixed ladder from the target on (:func:`lensaudit.refit.radii_from`), so that
+a smaller target tries all a larger one does and its refit is never worse.
+Each is verified with the exact r_max solver (:mod:`lensaudit.metrics`);
+where the grid let a fold through, points are added where D' is smallest and
+the program solved again. The coefficients are then rounded to the decimals
+the file uses for the entry (at least five significant digits) and verified
+again, with one more digit where rounding broke them; the pair whose written
+coefficients change D least wins.
 
 Slope. A model that only just increases stretches the image without bound
 when undistorted (by 1 / D'); the fixed model keeps D' >= :data:`SLOPE_FLOOR`
@@ -68,21 +71,18 @@ from .read.paths import read_file
 from .read.records import MODEL_COEFFICIENTS, STATUS_OK, DistortionEntry, parse_number
 from .refit import (
     DEFAULT_MARGIN,
-    EXTRA_DIGITS,
     FRAME,
     SLOPE_FLOOR,
     Change,
-    Fit,
     Goal,
     Verdict,
-    best_fit,
+    best_refit,
     change_of_distortion,
     decimals_of,
     format_like,
     goal_for,
     judge,
     pixels_per_unit,
-    rounded_texts,
 )
 from .xmlpatch import FilePatch, set_attributes
 
@@ -264,8 +264,8 @@ def fix_entry(
         r_max_before=before.r_max,
         r_normalized_before=before.r_normalized,
     )
-    fit = best_fit(entry.model, old, goal)
-    if fit is None:
+    refitted = best_refit(entry.model, old, goal, old_texts)
+    if refitted is None:
         return FixResult(
             **common,
             new=(),
@@ -279,8 +279,9 @@ def fix_entry(
             f"{goal.target:.4g} and reach {goal.reach:.4g} before folding with "
             f"D' >= {SLOPE_FLOOR:g}",
         )
-    new_texts, new, after = _rounded_fit(entry.model, fit, old_texts, goal)
-    change = change_of_distortion(entry.model, old, new, entry.aspect_ratio, goal.r_corner)
+    new_texts, new, change = refitted.texts, refitted.coefficients, refitted.change
+    # Verified against its own radius T >= the target, so it meets the goal too.
+    after = judge(entry.model, new, goal)
     status, message = STATUS_FIXED, ""
     if change.max_px > tolerance:
         status = STATUS_BEYOND_TOLERANCE
@@ -308,24 +309,6 @@ def written_texts(
     if texts is None:
         texts = {name: repr(value) for name, value in zip(names, values, strict=True)}
     return tuple(texts.get(name) or "0" for name in names)
-
-
-def _rounded_fit(
-    model: str, fit: Fit, old_texts: tuple[str, ...], goal: Goal
-) -> tuple[list[str], tuple[float, ...], Verdict]:
-    """(texts, coefficients, verdict) of the fit, rounded to the fewest extra digits
-    that still meet the goal; unrounded if none do."""
-    for extra in range(EXTRA_DIGITS + 1):
-        new_texts = rounded_texts(fit.coefficients, old_texts, extra)
-        new = tuple(float(t) for t in new_texts)
-        after = judge(model, new, goal)
-        if after.meets_goal:
-            break
-    else:
-        new_texts = [repr(v) for v in fit.coefficients]
-        new = fit.coefficients
-        after = judge(model, new, goal)
-    return new_texts, new, after
 
 
 def _beyond_tolerance(
@@ -376,18 +359,24 @@ def matching(
     audit: Audit, indices: Sequence[int], *, lens: str | None = None, focal: float | None = None
 ) -> list[int]:
     """Those of ``indices`` whose entry matches: ``lens`` "maker lens" as a
-    case-insensitive substring, ``focal`` the calibrated focal length in
-    millimetres."""
+    substring, ignoring case and with runs of white space as one space (as
+    ``lensaudit check`` suggests the command), ``focal`` the calibrated focal
+    length in millimetres."""
     chosen = []
-    needle = lens.casefold() if lens else None
+    needle = _spaced(lens) if lens else None
     for index in indices:
         entry = audit.entries[index]
-        if needle is not None and needle not in f"{entry.maker} {entry.lens}".casefold():
+        if needle is not None and needle not in _spaced(f"{entry.maker} {entry.lens}"):
             continue
         if focal is not None and not math.isclose(entry.focal, focal, rel_tol=1e-9):
             continue
         chosen.append(index)
     return chosen
+
+
+def _spaced(text: str) -> str:
+    """``text`` without case, runs of white space as one space."""
+    return " ".join(text.split()).casefold()
 
 
 def _matches(entry: DistortionEntry) -> Any:

@@ -462,11 +462,11 @@ def project(
 
     Returns ``(pixels, valid)``: pixels N x 2 (u, v) and a boolean mask,
     False for points behind or on the camera plane (Z <= 0), at or beyond
-    r_max, or not finite (also where X/Z or Y/Z exceeds the float range);
-    any other point is valid, subnormal coordinates included. A valid point
-    so far off axis that its pixel exceeds the float range (|X/Z| about
-    1e150 and more, on a model that never folds) has an infinite or NaN
-    pixel. Pixels of invalid points are NaN; with
+    r_max, or not finite (also where X/Z or Y/Z exceeds the float range),
+    or whose pixel is not finite (beyond the float range: |X/Z| about 1e150
+    and more on a model that never folds, or a pixel that overflows on the
+    way, 0 * inf); any other point is valid, subnormal coordinates included:
+    a valid point always has a finite pixel. Pixels of invalid points are NaN; with
     ``nan_for_invalid=False`` they keep what the polynomial gives (the
     folded-back position), which is faster. Pixels are those of
     the image as the camera recorded it (distorted), in the camera's pixel
@@ -566,6 +566,19 @@ def _project_blocks(
                 coordinate *= focal
                 coordinate += centre
                 pixels[start:stop, column] = coordinate
+            if check:
+                # A pixel beyond the float range (or 0 * inf = NaN) is no position.
+                _finite_pixels(pixels[start:stop], good, bad, nan_for_invalid)
+
+
+def _finite_pixels(pixels: FloatArray, good: BoolArray, bad: BoolArray, nan: bool) -> None:
+    """Points whose pixel is not finite made invalid (and their pixels NaN with ``nan``)."""
+    np.isfinite(pixels[:, 0], out=bad)
+    good &= bad
+    np.isfinite(pixels[:, 1], out=bad)
+    good &= bad
+    if nan and not good.all():
+        pixels[~good] = math.nan
 
 
 def _highest_first(camera: RadialCamera) -> tuple[float, ...]:

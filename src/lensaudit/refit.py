@@ -6,8 +6,8 @@ method is described there).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.polynomial import polynomial as P
@@ -36,9 +36,17 @@ REACH_SLACK = 1e-5
 MIN_SIGNIFICANT_DIGITS = 5
 
 
-GRID_POINTS = 161  # points of each grid of the linear program
-_SEARCH_POINTS = 9  # values of T tried before the bounded search
-SEARCH_SPAN = 4.0  # T is searched in [target, SEARCH_SPAN * target]
+GRID_POINTS = 161  # points of the image's grid of the linear program
+#: The slope's grid: s = r / (1 + r) at every 1/SLOPE_STEPS of [0, 1] up to the radius T.
+SLOPE_STEPS = 256
+#: The radii T tried: s = T / (1 + T) at every 1/RADIUS_STEPS of [0, 1], T = k / (64 - k),
+#: and T = inf. The same radii for every target, so that the radii tried for a
+#: target are those tried for any larger one, and more (see :func:`radii_from`).
+RADIUS_STEPS = 32
+_SEARCH_POINTS = 17  # values of the reach radius R tried before the bounded search
+#: Least slope the linear program asks beyond R, up to T: D' > 0 there (r_max
+#: beyond T), with room for the points between the grid's and for rounding.
+RISE = 0.02
 _REFINEMENTS = 12  # rounds of grid refinement before giving up
 EXTRA_DIGITS = 12  # digits added at most when rounding breaks a fix
 _GAUSS_POINTS = 48  # Gauss-Legendre nodes per axis for the RMS over the frame
@@ -275,55 +283,106 @@ class Fit:
     """Coefficients found by the linear program, before rounding."""
 
     coefficients: tuple[float, ...]
-    radius: float  # the T used: increasing on [0, T], D(T) >= reach
+    radius: float  # the T used: increasing on [0, T] (r_max beyond it)
     deviation: float  # the program's objective, Hugin units, on its grid
+    reach_radius: float = math.nan  # the R used: D' >= floor on [0, R], D(R) >= reach
+
+
+@dataclass(frozen=True)
+class Refit:
+    """A fit as it is written: rounded (:func:`rounded_fit`), judged against a
+    goal whose target is the fit's radius T, and its change of D."""
+
+    fit: Fit
+    texts: tuple[str, ...]
+    coefficients: tuple[float, ...]
+    verdict: Verdict
+    change: Change
+
+
+def _edge(radius: float) -> float:
+    """s = r / (1 + r) of a radius (1 for inf)."""
+    return 1.0 if math.isinf(radius) else radius / (1.0 + radius)
+
+
+_SLOPE_GRID = np.arange(SLOPE_STEPS + 1) / SLOPE_STEPS
+
+
+def slope_points(reach: float, radius: float, extra: Sequence[float] = ()) -> np.ndarray:
+    """The values of s = r / (1 + r) where the linear program asks for a slope,
+    for radii R (``reach``) and T (``radius``, may be inf): a fixed grid up
+    to T, R, T, and ``extra``."""
+    middle, edge = _edge(reach), _edge(max(radius, reach))
+    s = np.concatenate([_SLOPE_GRID[_SLOPE_GRID < edge], [middle, edge], np.asarray(extra)])
+    return s[(s >= 0) & (s <= edge)]
+
+
+def slope_degree(model: str) -> int:
+    """The degree of D' of a model."""
+    return _SLOPE_DEGREE[model]
+
+
+def scaled_slope_rows(model: str, s: np.ndarray) -> np.ndarray:
+    """(1 - s)^k D'(s / (1 - s)) per unit change of each coefficient (one column
+    each), k the degree of D': bounded for any radius, up to s = 1 (r = inf)."""
+    degree = _SLOPE_DEGREE[model]
+    terms = term_matrix(model)
+    return np.stack([_scaled(P.polyder(row), s, degree) for row in terms], axis=1)
+
+
+def least_slopes(model: str, s: np.ndarray, reach: float) -> np.ndarray:
+    """(1 - s)^k x the least slope the program asks at each s: the floor (with
+    :data:`FLOOR_SLACK`) up to the reach radius R, then :data:`RISE`."""
+    least = np.where(s <= _edge(reach), SLOPE_FLOOR * FLOOR_SLACK, RISE)
+    return least * (1 - s) ** _SLOPE_DEGREE[model]
 
 
 class _Program:
-    """The linear program of one entry, for any radius T (see the module docstring)."""
+    """The linear program of one entry, for any radii R and T (see the module docstring)."""
 
     def __init__(self, model: str, coefficients: Sequence[float], goal: Goal) -> None:
         self.model = model
         self.old = np.asarray(coefficients, dtype=np.float64)
         self.goal = goal
         self.terms = term_matrix(model)
-        self.slope_terms = np.array([P.polyder(row) for row in self.terms])
         self.old_curve = distortion_polynomial(model, coefficients)
         self.old_slope = P.polyder(self.old_curve)
         image = np.linspace(0.0, goal.r_corner, GRID_POINTS)[1:]  # D(0) = 0 always
         self.image_rows = np.stack([P.polyval(image, row) for row in self.terms], axis=1)
 
-    def solve(self, radius: float, extra: Sequence[float] = ()) -> Fit | None:
-        """The closest coefficients increasing up to ``radius`` (may be inf), or None."""
+    def solve(self, reach: float, radius: float, extra: Sequence[float] = ()) -> Fit | None:
+        """The closest coefficients with D' >= the floor on [0, R] (``reach``),
+        D(R) >= the goal's reach and D' > 0 on [R, T] (``radius``, may be inf),
+        or None.
+
+        Both slopes are imposed on r = s / (1 - s) for s on a fixed grid, and
+        at s = R / (1 + R) and T / (1 + T), as (1 - s)^k D'(s / (1 - s)) >=
+        (1 - s)^k x the slope: a polynomial in s whose rows stay bounded for
+        any radius, up to T = inf (s = 1, where its value is D''s leading
+        coefficient). ``extra``: more values of s.
+        """
         from scipy.optimize import linprog  # scipy: only to refit a model
 
         count = len(self.old)
-        if math.isinf(radius):
-            # D' >= floor on [0, inf): with r = s / (1 - s), (1 - s)^k D'(r) is a
-            # polynomial in s, positive on [0, 1]; its value at s = 1 is D''s
-            # leading coefficient. Rows divided by (1 + r)^k = (1 - s)^-k stay bounded.
-            s = np.concatenate([np.linspace(0.0, 1.0, GRID_POINTS), np.asarray(extra)])
-            s = s[(s >= 0) & (s <= 1)]
-            slope_rows, slope_limits = self._scaled_slopes(s)
-        else:
-            r = np.concatenate([np.linspace(0.0, radius, GRID_POINTS), np.asarray(extra)])
-            r = r[(r >= 0) & (r <= radius)]
-            slope_rows = np.stack([P.polyval(r, row) for row in self.slope_terms], axis=1)
-            slope_limits = P.polyval(r, self.old_slope) - SLOPE_FLOOR * FLOOR_SLACK
+        s = slope_points(reach, radius, extra)
+        slope_rows = scaled_slope_rows(self.model, s)
+        degree = _SLOPE_DEGREE[self.model]
+        slope_limits = _scaled(self.old_slope, s, degree) - least_slopes(self.model, s, reach)
         # Variables: the change of each coefficient, then t. All rows "<=".
         ones = np.ones((self.image_rows.shape[0], 1))
-        blocks = [
-            np.hstack([self.image_rows, -ones]),
-            np.hstack([-self.image_rows, -ones]),
-            np.hstack([-slope_rows, np.zeros((slope_rows.shape[0], 1))]),
-        ]
-        limits = [np.zeros(2 * len(ones)), slope_limits]
-        if math.isfinite(radius):
-            reach_row = np.array([P.polyval(radius, row) for row in self.terms] + [0.0])
-            blocks.append(-reach_row[None, :])
-            needed = self.goal.reach * (1 + REACH_SLACK)
-            limits.append(np.array([P.polyval(radius, self.old_curve) - needed]))
-        rows, bounds = np.vstack(blocks), np.concatenate(limits)
+        reach_row = np.array([P.polyval(reach, row) for row in self.terms] + [0.0])
+        needed = self.goal.reach * (1 + REACH_SLACK)
+        rows = np.vstack(
+            [
+                np.hstack([self.image_rows, -ones]),
+                np.hstack([-self.image_rows, -ones]),
+                np.hstack([-slope_rows, np.zeros((slope_rows.shape[0], 1))]),
+                -reach_row[None, :],
+            ]
+        )
+        bounds = np.concatenate(
+            [np.zeros(2 * len(ones)), slope_limits, [P.polyval(reach, self.old_curve) - needed]]
+        )
         if not (np.isfinite(rows).all() and np.isfinite(bounds).all()):
             return None  # values beyond the floats (a coefficient near the largest double)
         objective = np.zeros(count + 1)
@@ -338,25 +397,21 @@ class _Program:
         if solution.status != 0:
             return None
         change = solution.x[:count]
-        return Fit(tuple((self.old + change).tolist()), radius, float(solution.x[-1]))
+        return Fit(
+            tuple((self.old + change).tolist()),
+            max(radius, reach),
+            float(solution.x[-1]),
+            reach,
+        )
 
-    def _scaled_slopes(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rows of (1 - s)^k D'(s / (1 - s)) >= (1 - s)^k floor, per unit change."""
-        degree = _SLOPE_DEGREE[self.model]
-        rows = np.stack([_scaled(row, s, degree) for row in self.slope_terms], axis=1)
-        limits = _scaled(self.old_slope, s, degree) - SLOPE_FLOOR * FLOOR_SLACK * (1 - s) ** degree
-        return rows, limits
-
-    def slope_minimum(self, coefficients: Sequence[float], radius: float) -> list[float]:
-        """Grid points to add: where the slope of these coefficients is smallest."""
-        slope = P.polyder(distortion_polynomial(self.model, coefficients))
-        if math.isinf(radius):
-            s = np.linspace(0.0, 1.0, 20 * GRID_POINTS)
-            values = _scaled(slope, s, _SLOPE_DEGREE[self.model])
-        else:
-            s = np.linspace(0.0, radius, 20 * GRID_POINTS)
-            values = P.polyval(s, slope)
-        low = int(np.argmin(values))
+    def slope_minimum(self, fit: Fit) -> list[float]:
+        """Values of s to add to the grid: where the fit's slope, scaled as in
+        :meth:`solve`, is furthest below (or least above) what is asked."""
+        slope = P.polyder(distortion_polynomial(self.model, fit.coefficients))
+        s = np.linspace(0.0, _edge(fit.radius), 20 * SLOPE_STEPS)
+        spare = _scaled(slope, s, _SLOPE_DEGREE[self.model])
+        spare -= least_slopes(self.model, s, fit.reach_radius)
+        low = int(np.argmin(spare))
         step = s[1] - s[0]
         return [float(s[low]), float(max(s[low] - step / 2, 0)), float(s[low] + step / 2)]
 
@@ -372,57 +427,126 @@ def _scaled(polynomial: np.ndarray, s: np.ndarray, degree: int) -> np.ndarray:
     return total
 
 
-def best_fit(model: str, coefficients: Sequence[float], goal: Goal) -> Fit | None:
-    """The linear program's best coefficients over the radius T, verified exactly.
+def radii_from(target: float, reach: float) -> list[tuple[float, float]]:
+    """The pairs (R, T) tried for a target, given the best reach radius R
+    found without regard to it (:func:`search_reach`).
 
-    None when no coefficients of the model meet the goal (or the program
-    cannot find them within its refinements), and for a goal or coefficients
-    beyond what floats can pose the program with (a margin or a coefficient
-    near the largest double).
+    T runs over R itself and a fixed ladder k / (RADIUS_STEPS - k) (s = T / (1
+    + T) = k / RADIUS_STEPS) beyond R, then inf, each from the target on.
+    Each T is tried with that R (D' > 0 from R to T) and, beyond R, also as
+    its own reach radius (D' >= the floor all the way to T, where R folds
+    before the target would). Nothing else depends on the target, so a
+    smaller target tries every pair a larger one tries: its best refit is
+    never worse.
     """
-    beyond = math.isfinite(goal.target) and not math.isfinite(SEARCH_SPAN * goal.target)
-    if beyond or not math.isfinite(goal.reach * (1 + REACH_SLACK)):
+    steps = RADIUS_STEPS
+    ladder = [k / (steps - k) for k in range(1, steps) if k / (steps - k) > reach]
+    pairs = [(reach, reach)] if reach >= target else []
+    for radius in [*ladder, math.inf]:
+        if radius >= target:
+            pairs.append((reach, radius))
+            if math.isfinite(radius):
+                pairs.append((radius, radius))
+    return pairs
+
+
+def best_refit(
+    model: str, coefficients: Sequence[float], goal: Goal, templates: Sequence[str]
+) -> Refit | None:
+    """The refit that changes D least, over the radii R and T of :func:`radii_from`.
+
+    The reach radius R is searched first, without regard to the target
+    (:func:`search_reach`). Then each pair of radii is refitted, rounded as the
+    file writes the entry (``templates``: its coefficients as written) and
+    verified exactly against a goal with T as its target, whatever
+    ``goal.target`` is; that is what keeps the answer for a smaller target at
+    least as good. None when no coefficients of the model meet the goal (or
+    the program cannot find them within its refinements), and for a margin
+    beyond what floats can pose the program with.
+    """
+    if not math.isfinite(goal.reach * (1 + REACH_SLACK)):
         return None
+    best: Refit | None = None
     with np.errstate(all="ignore"):  # a program that overflows is not solved (see solve)
         program = _Program(model, coefficients, goal)
-        if math.isinf(goal.target):
-            candidates = [math.inf]
-        else:
-            candidates = _search_radius(program, goal.target)
-        for radius in candidates:
-            extra: list[float] = []
-            for _ in range(_REFINEMENTS):
-                fit = program.solve(radius, extra)
-                if fit is None:
-                    break
-                if judge(model, fit.coefficients, goal).meets_goal:
-                    return fit
-                extra += program.slope_minimum(fit.coefficients, radius)
-    return None
+        reach = search_reach(goal.reach, _deviation(program))
+        if reach is None:
+            return None
+        for pair in radii_from(goal.target, reach):
+            found = _refit_at(program, *pair, templates)
+            if found is not None and (best is None or found.change.max_px < best.change.max_px):
+                best = found
+    return best
 
 
-def _search_radius(program: _Program, target: float) -> list[float]:
-    """Radii T to try, best first: a coarse scan of [target, 4 target], then a bounded search."""
+def search_reach(reach: float, deviation: Callable[[float], float]) -> float | None:
+    """The reach radius R whose program with T = R changes D least (``deviation``,
+    inf where infeasible): a coarse scan of [reach / 2, reach / floor], then a
+    bounded search; None if none is feasible. Past reach / floor, D' >= floor
+    alone takes D to the goal's ``reach``. Nothing here depends on the target."""
     from scipy.optimize import minimize_scalar  # scipy: only to refit a model
 
-    radii = np.geomspace(target, SEARCH_SPAN * target, _SEARCH_POINTS)
-
-    def deviation(radius: float) -> float:
-        fit = program.solve(radius)
-        return math.inf if fit is None else fit.deviation
-
+    radii = np.geomspace(reach / 2, reach / SLOPE_FLOOR, _SEARCH_POINTS)
     values = [deviation(float(r)) for r in radii]
-    order = sorted(range(len(radii)), key=values.__getitem__)
-    best = order[0]
+    best = int(np.argmin(values))
     if not math.isfinite(values[best]):
-        return [float(radii[i]) for i in order[:3]]
+        return None
     low = float(radii[max(best - 1, 0)])
     high = float(radii[min(best + 1, len(radii) - 1)])
     refined = minimize_scalar(
-        deviation, bounds=(low, high), method="bounded", options={"xatol": 1e-3 * target}
+        deviation, bounds=(low, high), method="bounded", options={"xatol": 1e-3 * reach}
     )
-    found = [float(refined.x)] if refined.fun < values[best] else []
-    return found + [float(radii[i]) for i in order[:3]]
+    return float(refined.x) if refined.fun < values[best] else float(radii[best])
+
+
+def _deviation(program: _Program) -> Callable[[float], float]:
+    """The program's objective with R = T, as a function of R (inf where infeasible)."""
+
+    def deviation(radius: float) -> float:
+        fit = program.solve(radius, radius)
+        return math.inf if fit is None else fit.deviation
+
+    return deviation
+
+
+def _refit_at(
+    program: _Program, reach: float, radius: float, templates: Sequence[str]
+) -> Refit | None:
+    """The program's refit for radii R and T, rounded and verified; None if it fails."""
+    goal = replace(program.goal, target=radius)
+    model = program.model
+    extra: list[float] = []
+    for _ in range(_REFINEMENTS):
+        fit = program.solve(reach, radius, extra)
+        if fit is None:
+            return None
+        if judge(model, fit.coefficients, goal).meets_goal:
+            break
+        extra += program.slope_minimum(fit)
+    else:
+        return None
+    texts, new, verdict = rounded_fit(model, fit.coefficients, templates, goal)
+    if not verdict.meets_goal:
+        return None
+    change = change_of_distortion(model, program.old, new, goal.aspect_ratio, goal.r_corner)
+    if not math.isfinite(change.max_px):
+        return None
+    return Refit(fit, tuple(texts), new, verdict, change)
+
+
+def rounded_fit(
+    model: str, coefficients: Sequence[float], templates: Sequence[str], goal: Goal
+) -> tuple[list[str], tuple[float, ...], Verdict]:
+    """(texts, coefficients, verdict) of a fit, rounded to the fewest extra digits
+    that still meet the goal (:func:`rounded_texts`); unrounded if none do."""
+    for extra in range(EXTRA_DIGITS + 1):
+        texts = rounded_texts(coefficients, templates, extra)
+        new = tuple(float(t) for t in texts)
+        verdict = judge(model, new, goal)
+        if verdict.meets_goal:
+            return texts, new, verdict
+    new = tuple(coefficients)
+    return [repr(v) for v in new], new, judge(model, new, goal)
 
 
 def decimals_of(text: str) -> int:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.polynomial import polynomial as P
@@ -184,12 +184,15 @@ def neighbours(calibrations: CalibrationSet, focal: float) -> set[int]:
 @dataclass(frozen=True)
 class JointFit:
     """Coefficients of every calibration of a set (rounded where they moved), and
-    the smallest r_normalized over the focal range with them."""
+    the smallest r_normalized over the focal range with them; ``largest``:
+    the largest change of D of a moving calibration, in pixels
+    (:func:`lensaudit.refit.change_of_distortion`)."""
 
     coefficients: tuple[tuple[float, ...], ...]
     texts: tuple[tuple[str, ...], ...]
     r_normalized_between: float
     focal_between: float
+    largest: float = math.nan
 
 
 def refit_together(
@@ -202,32 +205,64 @@ def refit_together(
     """Refit the calibrations at positions ``moving`` together (the others stay
     as they are) so that every calibration and every model liblensfun
     interpolates between them meets ``goal``; None where the program finds
-    no such coefficients."""
+    no such coefficients. As :func:`lensaudit.refit.best_refit`: the radii R
+    and T of :func:`lensaudit.refit.radii_from`, each verified against its
+    own T, the one that changes D least (so never worse for a smaller target)."""
     program = _JointProgram(calibrations, old, moving, goal)
+
+    def deviation(radius: float) -> float:
+        solved = program.solve(radius, radius, ())
+        return math.inf if solved is None else solved[1]
+
+    best = None
+    with np.errstate(all="ignore"):
+        reach = refit.search_reach(goal.reach, deviation)
+        for pair in refit.radii_from(goal.target, reach) if reach is not None else ():
+            found = _together_at(program, pair, old_texts)
+            if found is not None and (best is None or found.largest < best.largest):
+                best = found
+    return best
+
+
+def _together_at(
+    program: _JointProgram, radii: tuple[float, float], old_texts: Sequence[Sequence[str]]
+) -> JointFit | None:
+    """The joint refit for radii R and T, rounded and verified against T; None if it fails."""
+    reach, radius = radii
+    goal = replace(program.goal, target=radius)
+    model, moving = program.sets.model, program.moving
     extra: list[float] = []
     for _ in range(_ROUNDS):
-        solved = program.best(extra)
+        solved = program.solve(reach, radius, extra)
         if solved is None:
             return None
         for digits in range(refit.EXTRA_DIGITS + 1):
             texts = [
-                tuple(refit.rounded_texts(solved[p], tuple(old_texts[p]), digits))
+                tuple(refit.rounded_texts(solved[0][p], tuple(old_texts[p]), digits))
                 if p in moving else tuple(old_texts[p])
-                for p in range(len(old))
+                for p in range(len(old_texts))
             ]  # fmt: skip
             coefficients = [tuple(float(t) for t in row) for row in texts]
-            judged = [refit.judge(calibrations.model, coefficients[p], goal) for p in moving]
-            if all(verdict.meets_goal for verdict in judged):
+            if all(refit.judge(model, coefficients[p], goal).meets_goal for p in moving):
                 break
-        lowest, where = sweep(calibrations, coefficients)
+        else:
+            return None
+        lowest, where = sweep(program.sets, coefficients)
         if lowest >= goal.margin:
-            return JointFit(tuple(coefficients), tuple(texts), lowest, where)
+            aspect = program.sets.aspect_ratio
+            largest = max(
+                refit.change_of_distortion(
+                    model, program.old[p], coefficients[p], aspect, goal.r_corner
+                ).max_px
+                for p in moving
+            )
+            return JointFit(tuple(coefficients), tuple(texts), lowest, where, largest)
         extra.append(where)
     return None
 
 
 class _JointProgram:
-    """The linear program of :func:`refit_together`, for any radius T."""
+    """The linear program of :func:`refit_together`, for any radii R and T."""
 
     def __init__(
         self,
@@ -242,7 +277,6 @@ class _JointProgram:
         self.goal = goal
         model = calibrations.model
         self.terms = refit.term_matrix(model)
-        self.slope_terms = np.array([P.polyder(row) for row in self.terms])
         image = np.linspace(0.0, goal.r_corner, refit.GRID_POINTS)[1:]
         self.image_rows = np.stack([P.polyval(image, row) for row in self.terms], axis=1)
         focals = sorted(set(calibrations.focals))
@@ -252,19 +286,11 @@ class _JointProgram:
         ]
         self.focals = list(focals) + [float(f) for chunk in inside for f in chunk]
 
-    def best(self, extra: Sequence[float]) -> list[tuple[float, ...]] | None:
-        """Each calibration's coefficients, for the best T of a scan; None if none is feasible."""
-        found = None
-        for radius in np.geomspace(self.goal.target, refit.SEARCH_SPAN * self.goal.target, 9):
-            solved = self.solve(float(radius), extra)
-            if solved is not None and (found is None or solved[1] < found[1]):
-                found = solved
-        return None if found is None else found[0]
-
     def solve(
-        self, radius: float, extra: Sequence[float]
+        self, reach: float, radius: float, extra: Sequence[float]
     ) -> tuple[list[tuple[float, ...]], float] | None:
-        """(coefficients, largest change of D in Hugin units) for a radius T, or None."""
+        """(coefficients, largest change of D in Hugin units) for radii R and T
+        (as :meth:`lensaudit.refit._Program.solve`), or None."""
         from scipy.optimize import linprog  # scipy: only to refit a model
 
         size = self.terms.shape[0]
@@ -272,9 +298,6 @@ class _JointProgram:
         # Variables: the changes of each moving calibration, then the largest
         # change of D of each (t_k), then the largest of all (t).
         count = size * moving + moving + 1
-        radii = np.linspace(0.0, radius, refit.GRID_POINTS)
-        slope_at = np.stack([P.polyval(radii, row) for row in self.slope_terms], axis=1)
-        reach_at = np.array([P.polyval(radius, row) for row in self.terms])
         blocks, limits = [], []
         for column in range(moving):  # |change of D| <= t_k <= t over the image
             rows = np.zeros((2 * len(self.image_rows) + 1, count))
@@ -286,19 +309,23 @@ class _JointProgram:
             rows[-1, -1] = -1.0
             blocks.append(rows)
             limits.append(np.zeros(len(rows)))
+        slopes = _Slopes(self.sets.model, reach, radius)
         for focal in [*self.focals, *extra]:
-            found = self._at_focal(float(focal), slope_at, reach_at, count, radius)
+            found = self._at_focal(float(focal), slopes, count)
             if found is not None:
                 blocks.append(found[0])
                 limits.append(found[1])
+        rows, bounds = np.vstack(blocks), np.concatenate(limits)
+        if not (np.isfinite(rows).all() and np.isfinite(bounds).all()):
+            return None  # values beyond the floats
         # The largest change first; then each calibration's as small as it can be.
         objective = np.zeros(count)
         objective[size * moving : -1] = _EACH
         objective[-1] = 1.0
         solution = linprog(
             objective,
-            A_ub=np.vstack(blocks),
-            b_ub=np.concatenate(limits),
+            A_ub=rows,
+            b_ub=bounds,
             bounds=[(None, None)] * (size * moving) + [(0, None)] * (moving + 1),
             method="highs",
         )
@@ -311,30 +338,42 @@ class _JointProgram:
         return new, float(solution.x[-1])
 
     def _at_focal(
-        self, focal: float, slope_at: np.ndarray, reach_at: np.ndarray, count: int, radius: float
+        self, focal: float, slopes: _Slopes, count: int
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Rows for the model interpolated at ``focal``: D' >= the floor on [0, T] and
-        D(T) >= the reach; None where no moving calibration enters it."""
+        """Rows for the model interpolated at ``focal``: D' >= the floor on [0, R],
+        D(R) >= the reach, D' > 0 on [R, T]; None where no moving calibration enters it."""
         size = self.terms.shape[0]
         mix = dict(weights(self.sets.focals, focal))
         if not any(position in mix for position in self.moving):
             return None
         current = sum(weight * self.old[p] for p, weight in mix.items())
-        old_slope = 1.0 + slope_at @ current
-        old_reach = radius + reach_at @ current
-        slope_rows = np.zeros((len(slope_at), count))
+        old_slope = slopes.identity + slopes.rows @ current
+        old_reach = slopes.reach + slopes.reach_row @ current
+        slope_rows = np.zeros((len(slopes.rows), count))
         reach_row = np.zeros((1, count))
         for column, position in enumerate(self.moving):
             weight = mix.get(position, 0.0)
             span = slice(column * size, (column + 1) * size)
-            slope_rows[:, span] = -weight * slope_at
-            reach_row[0, span] = -weight * reach_at
-        floor = refit.SLOPE_FLOOR * refit.FLOOR_SLACK
+            slope_rows[:, span] = -weight * slopes.rows
+            reach_row[0, span] = -weight * slopes.reach_row
         needed = self.goal.reach * (1 + refit.REACH_SLACK)
         return (
             np.vstack([slope_rows, reach_row]),
-            np.concatenate([old_slope - floor, [old_reach - needed]]),
+            np.concatenate([old_slope - slopes.least, [old_reach - needed]]),
         )
+
+
+class _Slopes:
+    """The slope and reach rows of one model for radii R and T, per unit change
+    of each coefficient (see :func:`lensaudit.refit.slope_points`)."""
+
+    def __init__(self, model: str, reach: float, radius: float) -> None:
+        s = refit.slope_points(reach, radius)
+        self.rows = refit.scaled_slope_rows(model, s)
+        self.identity = (1 - s) ** refit.slope_degree(model)  # the scaled slope of D = r
+        self.least = refit.least_slopes(model, s, reach)
+        self.reach = reach
+        self.reach_row = np.array([P.polyval(reach, row) for row in refit.term_matrix(model)])
 
 
 # ---------------------------------------------------------------------------

@@ -57,6 +57,9 @@ QUOTED_LIMIT = 40
 #: A quoted value longer than QUOTED_LIMIT: its opening quote follows no letter
 #: or digit, so that the apostrophe of "master's" opens nothing.
 _QUOTED = re.compile(rf"(?<!\w)'([^']{{{QUOTED_LIMIT}}})[^']{{2,}}'")
+#: Where a message ends with a command to paste (``lensaudit.check.findings.fix_suggestion``):
+#: :func:`clip` keeps it byte for byte.
+COMMAND_MARK = "`lensaudit fix "
 
 
 class CheckError(LoadError):
@@ -178,10 +181,20 @@ def clip(text: str, limit: int = MESSAGE_LIMIT) -> str:
     """``text`` on one line, at most ``limit`` characters.
 
     Quoted values are shortened first, so that the words after a huge value
-    (``'999...' overflows a double``) survive.
+    (``'999...' overflows a double``) survive. A command to paste that ends
+    the message (after :data:`COMMAND_MARK`) is kept whole.
     """
-    text = _QUOTED.sub(lambda m: f"'{m.group(1)[:QUOTED_LIMIT]}\u2026'", " ".join(text.split()))
-    return text if len(text) <= limit else text[: limit - 1] + "\u2026"
+    head, mark, command = text.rpartition(COMMAND_MARK)
+    if not mark:
+        head, command = text, ""
+    else:
+        # The command ends the message, shell-quoted and on one line already:
+        # shortened or respaced, it would no longer select its entry.
+        command = mark + command
+    spaced = " ".join(head.split()) + (" " if command and head[-1:].isspace() else "")
+    head = _QUOTED.sub(lambda m: f"'{m.group(1)[:QUOTED_LIMIT]}\u2026'", spaced)
+    room = max(limit - len(command), 1)
+    return (head if len(head) <= room else head[: room - 1] + "\u2026") + command
 
 
 def clip_key(key: tuple) -> tuple:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -217,7 +218,10 @@ def _refit(
 
     audited = [i for i, entry in enumerate(audit.entries) if entry.status == "ok"]
     if (lens or focal is not None) and not stage.matching(audit, audited, lens=lens, focal=focal):
-        wanted = [f"--lens {lens!r}" if lens else "", "" if focal is None else f"--focal {focal:g}"]
+        wanted = [
+            f"--lens {shlex.quote(lens)}" if lens else "",
+            "" if focal is None else f"--focal {focal:g}",
+        ]
         fail(
             f"no audited entry of {audit.source.label} matches {' and '.join(filter(None, wanted))}"
         )

@@ -106,9 +106,11 @@ def project(
 
     The output is CSV with columns u, v, valid: the pixel in the recorded
     (distorted) image, and whether the point is in front of the camera and
-    inside the model's valid domain (undistorted radius below r_max). u and v
-    are empty where valid is false: there the model folds back, and a point
-    far outside the field of view would land inside the image.
+    inside the model's valid domain (undistorted radius below r_max) with a
+    finite pixel; valid is not "inside the image". u and v are empty where
+    valid is false: there the model folds back, and a point far outside the
+    field of view would land inside the image, or the pixel is beyond the
+    float range.
 
     \b
     Examples:

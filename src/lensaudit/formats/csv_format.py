@@ -5,7 +5,9 @@ and empty for values that do not apply; booleans as ``true``/``false``. Text
 is quoted as RFC 4180 says (only where it holds a comma, quote or line break).
 
 Every CSV lensaudit writes goes through :func:`write_rows`, which renders
-every row at once, column by column.
+every row at once, column by column. Text is kept byte for byte: a cell that
+begins with ``=``, ``+``, ``-`` or ``@`` is not altered for spreadsheets,
+which is the reader's to import as text (docs/input.md says why).
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+import shlex
 from collections.abc import Iterable
 from typing import Any
 
@@ -157,11 +158,20 @@ def fold_finding(entry: DistortionEntry, m: Any, margin: float, verbose: bool) -
     return None
 
 
+#: Longest lens name a suggested command carries; a prefix selects the lens as well.
+SUGGESTED_NAME_LIMIT = 100
+
+
 def fix_suggestion(entry: DistortionEntry) -> str:
     """The ``lensaudit fix`` command that refits this entry, on the same database.
 
-    The lens name goes in double quotes (single-quoted text is what messages
-    shorten), with the characters a POSIX shell expands there escaped.
+    ``--lens`` matches a part of the name, with runs of white space as one
+    space: the command names the lens so (check prints a finding on one
+    line), up to its first control character and at most
+    :data:`SUGGESTED_NAME_LIMIT` characters, shell-quoted (``shlex.quote``),
+    so that it can be pasted into a POSIX shell as it is printed.
     """
-    lens = re.sub(r'([\\"$`])', r"\\\1", entry.lens)
-    return f'`lensaudit fix --lens "{lens}" --focal {entry.focal:g}` refits it'
+    name = re.split(r"[\x00-\x1f\x7f-\x9f]", " ".join(entry.lens.split()), maxsplit=1)[0]
+    name = name[:SUGGESTED_NAME_LIMIT].strip()
+    words = ["lensaudit", "fix", *(["--lens", name] if name else []), "--focal"]
+    return f"`{shlex.join(words)} {entry.focal:g}` refits it"
