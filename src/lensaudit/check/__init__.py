@@ -244,10 +244,10 @@ def _check(
     before_read = parse_sources(baseline_sources(label, source.paths), cache, read)
     before_read, kept, replaced, incomparable = readable_baseline(before_read, HISTORY_DEPTH, cache)
     # What the baseline holds places each duplicate on the one of its two the change added.
-    own: dict[bytes, list] = {}  # what each file makes alone, by its bytes' digest
-    files, current = analyse_parsed(read, margin, verbose, cache, Known(before_read), own)
+    by_digest: dict[bytes, list] = {}  # what each file makes alone, by its bytes' digest
+    files, current = analyse_parsed(read, margin, verbose, cache, Known(before_read), by_digest)
     # The baseline's files the change left alone make what they made in the database.
-    _, before = analyse_parsed(before_read, margin, verbose, cache, None, own)
+    _, before = analyse_parsed(before_read, margin, verbose, cache, None, by_digest)
     findings, resolved = compare(current, before + kept, read, incomparable)
     notices = baseline_notices(read, label, replaced, incomparable)
     if notices:

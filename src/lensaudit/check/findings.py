@@ -39,14 +39,14 @@ def analyse_parsed(
     verbose: bool,
     cache: Cache | None = None,
     known: Known | None = None,
-    own: dict[bytes, list[Identified]] | None = None,
+    by_digest: dict[bytes, list[Identified]] | None = None,
 ) -> tuple[list[CheckedFile], list[Identified]]:
     """:func:`analyse` of files already parsed; findings in file and line order.
     The metrics of a file come from ``cache`` where it has them (see
     :func:`lensaudit.pipeline.file_metrics`); ``known``, what a baseline
     holds, places each duplicate on the one of its two the change added.
 
-    ``own`` maps the digest of a file's bytes to the findings it makes alone
+    ``by_digest`` maps the digest of a file's bytes to the findings it makes alone
     (:func:`file_findings`): those of a file it holds are taken from it, not
     worked out again (a baseline shares most of its files with the database
     checked), and those worked out are added to it."""
@@ -61,19 +61,21 @@ def analyse_parsed(
     def add(file_index: int, item: Identified) -> None:
         ordered.append(((file_index, item.finding.line, len(ordered)), item))
 
-    def across() -> list[tuple[int, tuple]]:
+    def rules_across_files() -> list[tuple[int, tuple]]:
         """The findings of the rules that look across files, as plain data."""
         context = rules.Context(read, margin, verbose, known)
-        return [(index, _plain(item)) for index, item in rules.run(rules.families(True), context)]
+        return [(index, _as_data(item)) for index, item in rules.run(rules.families(True), context)]
 
-    own_findings, across_files = file_findings(read, margin, verbose, cache, known, own, across)
+    own_findings, across_found = file_findings(
+        read, margin, verbose, cache, known, by_digest, rules_across_files
+    )
     # Each file's own findings, in the order the rules make them: a file's
     # findings on one line keep that order.
     for index, items in enumerate(own_findings):
         for item in items:
             add(index, item)
-    for index, item in across_files:
-        add(index, _identified(item))
+    for index, item in across_found:
+        add(index, _from_data(item))
     ordered.sort(key=lambda pair: pair[0])
     return files, [item for _, item in ordered]
 
@@ -84,34 +86,34 @@ def file_findings(
     verbose: bool,
     cache: Cache | None = None,
     known: Known | None = None,
-    own: dict[bytes, list[Identified]] | None = None,
-    besides: Callable[[], list] = list,
+    by_digest: dict[bytes, list[Identified]] | None = None,
+    across_files: Callable[[], list] = list,
 ) -> tuple[list[list[Identified]], list]:
     """The findings each file makes alone, per file: its distortion entries,
     vignetting and TCA records, duplicate focal lengths, conflicting
     calibrations, vignetting at the calibration script's starting values and
     focal-series outliers (none for a file with a file-level problem); and
-    what ``besides()`` gives (plain data), worked out beside them, on the
-    first core free. A file whose digest ``own`` holds has the findings it
+    what ``across_files()`` gives (plain data), worked out beside them, on the
+    first core free. A file whose digest ``by_digest`` holds has the findings it
     holds there (the same bytes make the same findings); the others are
-    worked out and added to ``own``."""
-    if own is None:
-        return _file_findings(read, margin, verbose, cache, known, besides)
+    worked out and added to ``by_digest``."""
+    if by_digest is None:
+        return _file_findings(read, margin, verbose, cache, known, across_files)
     found: list[list[Identified]] = [[] for _ in read]
     todo = []
     for index, file in enumerate(read):
         digest = file.digest
-        if digest and digest in own:
-            found[index] = list(own[digest])
+        if digest and digest in by_digest:
+            found[index] = list(by_digest[digest])
         else:
             todo.append(index)
     made, also = _file_findings(
-        [read[index] for index in todo], margin, verbose, cache, known, besides
+        [read[index] for index in todo], margin, verbose, cache, known, across_files
     )
     for index, items in zip(todo, made, strict=True):
         found[index] = items
         if read[index].digest:
-            own[read[index].digest] = items
+            by_digest[read[index].digest] = items
     return found, also
 
 
@@ -121,19 +123,19 @@ def _file_findings(
     verbose: bool,
     cache: Cache | None,
     known: Known | None,
-    besides: Callable[[], list] = list,
+    across_files: Callable[[], list] = list,
 ) -> tuple[list[list[Identified]], list]:
     """:func:`file_findings` of files, every one worked out: the rules on
     every core where that pays, each core a share of the files (what a file
     makes alone does not depend on the others; see
-    :func:`lensaudit.read.parallel.map_sized`), and ``besides()`` as one more
+    :func:`lensaudit.read.parallel.map_sized`), and ``across_files()`` as one more
     item, taken by the first core free. The metrics of the entries are
     worked out with the rules, or first here with a ``cache``, which this
     process keeps."""
     found: list[list[Identified]] = [[] for _ in read]
     parsed = [index for index, file in enumerate(read) if file.problem is None]
     if not parsed:
-        return found, besides()  # numpy and the audits are not needed
+        return found, across_files()  # numpy and the audits are not needed
     solved = None  # with a cache: index into read -> the metrics of its entries
     if cache is not None:
         solved = dict(zip(parsed, _solved([read[index] for index in parsed], cache), strict=True))
@@ -148,10 +150,10 @@ def _file_findings(
             verbose,
             known,
         )
-        return [[_plain(item) for item in items] for items in made]
+        return [[_as_data(item) for item in items] for items in made]
 
     def job(batch: list[int] | None) -> list:
-        return besides() if batch is None else batch_findings(batch)
+        return across_files() if batch is None else batch_findings(batch)
 
     sizes = [read[index].size for index in parsed]
     batches = [[parsed[p] for p in share] for share in parallel.shares(sizes, parallel.cpus())]
@@ -160,7 +162,7 @@ def _file_findings(
     *made, also = parallel.map_sized(job, [*batches, None], [*batch_sizes, 0])
     for batch, items_of in zip(batches, made, strict=True):
         for index, items in zip(batch, items_of, strict=True):
-            found[index] = [_identified(item) for item in items]
+            found[index] = [_from_data(item) for item in items]
     return found, also
 
 
@@ -178,13 +180,13 @@ def _solved(
     return solved
 
 
-def _plain(item: Identified) -> tuple:
-    """A finding as plain data (what a process sends back; see :func:`_identified`)."""
+def _as_data(item: Identified) -> tuple:
+    """A finding as plain data (what a process sends back; see :func:`_from_data`)."""
     return (tuple(vars(item.finding).values()), item.keys, item.names)
 
 
-def _identified(plain: tuple) -> Identified:
-    """The finding :func:`_plain` made plain data of."""
+def _from_data(plain: tuple) -> Identified:
+    """The finding :func:`_as_data` made plain data of."""
     fields, keys, names = plain
     return Identified(Finding(*fields), keys, names)
 
