@@ -23,7 +23,17 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 #: Sections in the order they are printed; others found on disk follow.
-ORDER = ("solver", "scan", "mechanisms", "memory", "check", "report", "projection", "history")
+ORDER = (
+    "solver",
+    "scan",
+    "mechanisms",
+    "memory",
+    "lines",
+    "check",
+    "report",
+    "projection",
+    "history",
+)
 
 
 def sections() -> list[str]:

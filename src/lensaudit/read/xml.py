@@ -764,6 +764,8 @@ def _visit_piece(
         visiting.add(piece, line_of)
     elif hasattr(piece, "target") and hasattr(visiting, "instruction"):
         visiting.instruction(piece)
+    if lines is not None:
+        lines.release()
 
 
 def _visit_tree(root: Any, visiting: Visitor, read: tuple[str, ...], line_of: Callable) -> None:
@@ -873,11 +875,20 @@ class _Lines:
 
     def number(self, piece: Any) -> None:
         """Number the elements of the next piece in document order."""
-        self.of.clear()  # the elements of earlier pieces are gone
+        self.release()
         elements = [e for e in piece.iter() if isinstance(e.tag, str)]
         found = self._starts[self._next : self._next + len(elements)]
         self._next += len(elements)
         self.of.update(zip(elements, found, strict=False))  # any left: libxml2 numbers them
+
+    def release(self) -> None:
+        """Let go of the elements numbered, while their piece is still in the tree.
+
+        Letting go of an element of a piece cut out of the tree, lxml walks
+        the piece in document order up to the first element still referred
+        to: after the cut, the references to a piece's n elements, let go
+        of in document order, would take time in n squared."""
+        self.of.clear()
 
 
 def _line_getter(lines: _Lines | None, root: Any) -> Callable[[Any], int]:
