@@ -153,8 +153,12 @@ def test_lines_of_a_file_with_cr_only_line_ends_are_its_lines(bundled_db):
         assert [row[0] for row in tables.distortion] == expected
 
 
-@pytest.mark.parametrize("padding", [b"\n" * 70_000, b"<!-- -->\n" * 70_000])
-@pytest.mark.parametrize("root", [b"<lensdatabase", b'<lensdatabase xmlns="http://x.org"'])
+@pytest.mark.parametrize(
+    "padding", [b"\n" * 70_000, b"<!-- -->\n" * 70_000], ids=["blank lines", "comments"]
+)
+@pytest.mark.parametrize(
+    "root", [b"<lensdatabase", b'<lensdatabase xmlns="http://x.org"'], ids=["plain", "namespaced"]
+)
 def test_lines_beyond_65535_are_counted(bundled_db, padding, root):
     # A default namespace has the file read as one tree rather than piece by piece.
     data = (bundled_db / "slr-tokina.xml").read_bytes().replace(b"<lensdatabase", root, 1)
