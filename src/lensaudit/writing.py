@@ -46,14 +46,39 @@ class WriteError(OSError):
         return str(self.args[0])
 
 
+#: Whether Ctrl-C has come since :func:`catch_interrupts` (a list: set by the handler).
+_interrupted = [False]
+
+
 def catch_interrupts() -> None:
     """Make Ctrl-C raise :class:`Interrupted` in this process (and in the
-    processes it forks)."""
+    processes it forks).
+
+    Code that is not lensaudit's can lose the exception (lxml's module
+    initialisation does, when Ctrl-C comes while it registers its classes
+    with :mod:`abc`): the first Ctrl-C is also remembered, for
+    :func:`raise_if_interrupted`. A second one ends the process at once,
+    with "lensaudit: interrupted" and status 130, wherever it comes (in the
+    handling of the first, say)."""
 
     def interrupted(signum: int, frame: Any) -> None:
+        if _interrupted[0]:
+            try:
+                os.write(2, b"lensaudit: interrupted\n")
+            except OSError:  # standard error closed: the status says it
+                pass
+            os._exit(EXIT_INTERRUPTED)
+        _interrupted[0] = True
         raise Interrupted
 
     signal.signal(signal.SIGINT, interrupted)
+
+
+def raise_if_interrupted() -> None:
+    """Raise :class:`Interrupted` if Ctrl-C came since :func:`catch_interrupts`
+    (its exception lost on the way), before output is written."""
+    if _interrupted[0]:
+        raise Interrupted
 
 
 def output_in_input(
@@ -151,7 +176,11 @@ class OutputSet:
             raise WriteError(f"cannot write {path}: {reason}", reason) from None
 
     def commit(self) -> None:
-        """Rename every file into place, SIGINT held back until all are."""
+        """Rename every file into place, SIGINT held back until all are; none
+        if Ctrl-C came (see :func:`raise_if_interrupted`)."""
+        if _interrupted[0]:
+            self.discard()
+            raise Interrupted
         with _signals_held():
             done = 0
             try:
@@ -193,6 +222,7 @@ def _signals_held() -> Iterator[None]:
 def output_stream(path: str | os.PathLike[str] | None) -> Iterator[IO[str]]:
     """Standard output, or a text stream whose content becomes ``path`` once the
     block ends normally (nothing is written if it raises)."""
+    raise_if_interrupted()
     if path is None or str(path) == "-":
         yield sys.stdout
         return
