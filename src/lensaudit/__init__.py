@@ -20,9 +20,34 @@ The submodules follow the pipeline (:mod:`~lensaudit.pipeline`):
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+import sys
 
-from .version import __version__
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    """Ctrl-C while the ``lensaudit`` command imports what it needs: nothing
+    is written yet, so it ends at once, as it ends any other time."""
+    try:
+        os.write(2, b"lensaudit: interrupted\n")
+    except OSError:  # standard error closed: the status says it
+        pass
+    os._exit(130)
+
+
+# The command (``python -m lensaudit``, while its module is located sys.argv[0]
+# is "-m"; the console script ``lensaudit``) takes Ctrl-C from its first line
+# on, before its imports: `lensaudit.console.run` then installs its own handler.
+# `_signal` is the interpreter's own, already loaded: no import to interrupt.
+if getattr(sys, "argv", None) and (
+    sys.argv[0] == "-m"
+    or os.path.splitext(os.path.basename(sys.argv[0]))[0].removesuffix("-script") == "lensaudit"
+):
+    import _signal
+
+    _signal.signal(_signal.SIGINT, _interrupted_while_starting)
+
+from collections.abc import Sequence  # noqa: E402 - after Ctrl-C is taken
+
+from .version import __version__  # noqa: E402
 
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False

@@ -8,7 +8,9 @@ console command (:mod:`lensaudit.console`) and for the click command alike.
 
 from __future__ import annotations
 
+import errno
 import gc
+import io
 import os
 import sys
 from collections import namedtuple
@@ -18,7 +20,7 @@ from importlib import import_module
 from pathlib import Path
 
 from . import writing
-from .formats import writer
+from .formats import printable, writer
 from .pipeline import run as audit
 from .read import Cache, read
 from .read.paths import display_path, resolve
@@ -27,7 +29,7 @@ from .read.records import LoadError
 # typing only for type checkers: a scan from the cache never imports it.
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import NoReturn, TextIO
+    from typing import Any, NoReturn, TextIO
 
 #: Exit status for bad usage or input that could not be read at all.
 EXIT_INPUT_ERROR = 2
@@ -113,6 +115,102 @@ def scan_arguments(words: list[str]) -> ScanArguments | None:
     return found
 
 
+class _WholeWriter(io.BufferedWriter):
+    """A buffered writer that writes all it is given, or raises.
+
+    Python's own returns a short count, without an error, when the reader of
+    a pipe goes away during a write larger than its buffer; the text stream
+    over it ignores the count, and the rest of the output would be dropped
+    silently (exit status 0, as if all had been read).
+    """
+
+    def write(self, data: bytes) -> int:  # type: ignore[override]
+        view = memoryview(data).cast("B")
+        done = super().write(view)
+        while done < len(view):
+            more = super().write(view[done:])
+            if not more:
+                raise BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE))
+            done += more
+        return done
+
+
+class _Closed(io.RawIOBase):
+    """Where a standard stream that was closed when lensaudit started is
+    written: writing to it is an error (``strerror``: "NAME is closed")."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self._name = name
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: object) -> int:
+        raise OSError(errno.EBADF, f"{self._name} is closed")
+
+
+class _Discarded(io.RawIOBase):
+    """Standard error closed: messages go nowhere (the exit status says it)."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: bytes) -> int:  # type: ignore[override]
+        return len(memoryview(data))
+
+
+def standard_streams() -> None:
+    """Set up standard output and error for a command.
+
+    Text a terminal's encoding cannot show is written as Python escapes
+    (``\\u0417``: "backslashreplace"), never an error; files written with
+    ``--output`` are UTF-8 whatever the terminal. A write is whole or an
+    error (see :class:`_WholeWriter`). Standard output closed (``>&-``) is an
+    error at the first write ("standard output is closed", exit status 2);
+    standard error closed, messages are dropped. A closed descriptor 0, 1 or
+    2 is opened on the null device, so that no file this process opens takes
+    its number (and a child process's standard stream with it).
+    """
+    closed = {name: getattr(sys, name) is None for name in ("stdin", "stdout", "stderr")}
+    for descriptor in range(3):
+        try:
+            os.fstat(descriptor)
+        except OSError:  # the lowest number free, the lower ones being open: this one
+            os.open(os.devnull, os.O_RDWR)
+    if closed["stdout"]:
+        writer: Any = _Closed("standard output")
+        sys.stdout = io.TextIOWrapper(writer, encoding="utf-8", write_through=True)
+    else:
+        sys.stdout = _escaping(sys.stdout)
+    if closed["stderr"]:
+        discarded: Any = _Discarded()
+        sys.stderr = io.TextIOWrapper(discarded, encoding="utf-8")
+    else:
+        sys.stderr = _escaping(sys.stderr)
+
+
+def _escaping(stream: TextIO) -> TextIO:
+    """``stream`` writing what its encoding cannot show as escapes, whole writes only."""
+    stream.flush()
+    try:
+        descriptor = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        descriptor = -1
+    if os.name != "posix" or descriptor < 0:  # a console of its own, or no descriptor
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+        return stream
+    raw = io.FileIO(descriptor, "w", closefd=False)
+    return io.TextIOWrapper(  # type: ignore[return-value]
+        _WholeWriter(raw),
+        encoding=stream.encoding,
+        errors="backslashreplace",
+        newline="\n",
+        line_buffering=stream.line_buffering,
+    )
+
+
 def use_cache_dir(directory: str | os.PathLike[str]) -> None:
     """Make ``directory`` the cache's directory for this run (and the processes
     it starts): what ``--cache-dir`` does, the same as $LENSAUDIT_CACHE_DIR."""
@@ -120,16 +218,20 @@ def use_cache_dir(directory: str | os.PathLike[str]) -> None:
 
 
 def fail(message: str) -> NoReturn:
-    """Print a one-line error and exit with status 2 (no traceback)."""
-    sys.stderr.write(f"lensaudit: error: {message}\n")
-    sys.stderr.flush()
+    """Print a one-line error and exit with status 2 (no traceback); what it
+    quotes (names from a database, paths) cannot move the terminal's cursor."""
+    try:
+        sys.stderr.write(f"lensaudit: error: {printable(message)}\n")
+        sys.stderr.flush()
+    except (AttributeError, OSError, ValueError):  # standard error closed: the status says it
+        pass
     sys.exit(EXIT_INPUT_ERROR)
 
 
 def os_error_message(error: OSError) -> str:
     """The one line an error of the file system is reported with."""
     where = f"{display_path(error.filename)}: " if error.filename is not None else ""
-    return f"lensaudit: error: {where}{error.strerror or error}"
+    return f"lensaudit: error: {printable(where + str(error.strerror or error))}"
 
 
 @contextmanager

@@ -21,13 +21,22 @@ from .commands import (
     os_error_message,
     scan,
     scan_arguments,
+    standard_streams,
 )
-from .writing import EXIT_INTERRUPTED, Interrupted, WriteError, catch_interrupts
+from .formats import printable
+from .writing import (
+    EXIT_INTERRUPTED,
+    Interrupted,
+    WriteError,
+    catch_interrupts,
+    raise_if_interrupted,
+)
 
 # typing only for type checkers
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import NoReturn
+    from collections.abc import Callable
+    from typing import Any, NoReturn
 
 __all__ = ["ScanArguments", "dispatch", "run", "scan_arguments"]
 
@@ -41,9 +50,18 @@ def _scan_directly(arguments: ScanArguments) -> int:
     except BrokenPipeError:  # the reader went away: nothing more to say
         return 1
     except OSError as error:
-        sys.stderr.write(os_error_message(error) + "\n")
+        _say(os_error_message(error))
         return EXIT_INPUT_ERROR
     return 0
+
+
+def _say(line: str) -> None:
+    """Write a line to standard error, if it can still be written."""
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except (AttributeError, OSError, ValueError):  # closed, or its reader gone
+        pass
 
 
 def _status(code: object) -> int:
@@ -52,7 +70,7 @@ def _status(code: object) -> int:
         return 0
     if isinstance(code, int):
         return code
-    print(code, file=sys.stderr)
+    _say(printable(str(code)))
     return 1
 
 
@@ -64,13 +82,13 @@ def dispatch(words: list[str]) -> int:
     try:
         return _dispatch(words)
     except Interrupted as stop:
-        sys.stderr.write(f"lensaudit: {stop.message}\n")
+        _say(f"lensaudit: {stop.message}")
         return stop.status
     except KeyboardInterrupt:
-        sys.stderr.write("lensaudit: interrupted\n")
+        _say("lensaudit: interrupted")
         return EXIT_INTERRUPTED
     except WriteError as error:
-        sys.stderr.write(f"lensaudit: error: {error}\n")
+        _say(f"lensaudit: error: {printable(str(error))}")
         return EXIT_INPUT_ERROR
 
 
@@ -87,6 +105,19 @@ def _dispatch(words: list[str]) -> int:
     return 0
 
 
+def _interrupts_kept(hook: Callable[[Any], object]) -> Callable[[Any], object]:
+    """``sys.unraisablehook`` that is silent about Ctrl-C: where Python cannot
+    raise it (a finaliser, a callback), it is kept for the end of the
+    command (:func:`lensaudit.writing.raise_if_interrupted`), not printed
+    as "Exception ignored" with a traceback."""
+
+    def unraisable(info: Any) -> None:
+        if not isinstance(info.exc_value, (Interrupted, KeyboardInterrupt)):
+            hook(info)
+
+    return unraisable
+
+
 def run() -> NoReturn:
     """The ``lensaudit`` console command; ends without the interpreter's teardown.
 
@@ -95,12 +126,25 @@ def run() -> NoReturn:
     sees: a fifth of a cold scan. The process ends without it, with the
     command's exit status. Anything but an exit (a crash) takes Python's
     usual way out.
+
+    Ctrl-C at any moment ends it with "lensaudit: interrupted" and status 130:
+    while it starts (see :mod:`lensaudit`), while it runs, after its output
+    (not yet flushed), and where code not lensaudit's lost the exception (see
+    :func:`lensaudit.writing.catch_interrupts`).
     """
-    catch_interrupts()
-    code = dispatch(sys.argv[1:])
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
-            code = code or 1
+    try:
+        catch_interrupts()
+        sys.unraisablehook = _interrupts_kept(sys.unraisablehook)
+        standard_streams()
+        code = dispatch(sys.argv[1:])
+        if code != EXIT_INTERRUPTED:
+            raise_if_interrupted()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
+                code = code or 1
+    except (Interrupted, KeyboardInterrupt):
+        _say("lensaudit: interrupted")
+        code = EXIT_INTERRUPTED
     os._exit(code)

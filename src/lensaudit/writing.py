@@ -70,15 +70,42 @@ class WriteError(OSError):
         return str(self.args[0])
 
 
+#: The signal (SIGINT or SIGTERM) that came since :func:`catch_interrupts`, or 0
+#: (a list: set by the handler).
+_interrupted = [0]
+
+
 def catch_interrupts() -> None:
     """Make Ctrl-C (SIGINT) and SIGTERM raise :class:`Interrupted` in this
-    process (and in the processes it forks)."""
+    process (and in the processes it forks).
+
+    Code that is not lensaudit's can lose the exception (lxml's module
+    initialisation does, when Ctrl-C comes while it registers its classes
+    with :mod:`abc`): the first signal is also remembered, for
+    :func:`raise_if_interrupted`. A second one ends the process at once,
+    with "lensaudit: interrupted" (or "terminated") and its status, wherever
+    it comes (in the handling of the first, say)."""
 
     def interrupted(signum: int, frame: Any) -> None:
+        if _interrupted[0]:
+            stop = Interrupted(signum)
+            try:
+                os.write(2, f"lensaudit: {stop.message}\n".encode())
+            except OSError:  # standard error closed: the status says it
+                pass
+            os._exit(stop.status)
+        _interrupted[0] = signum
         raise Interrupted(signum)
 
     for each in (signal.SIGINT, signal.SIGTERM):
         signal.signal(each, interrupted)
+
+
+def raise_if_interrupted() -> None:
+    """Raise :class:`Interrupted` if Ctrl-C came since :func:`catch_interrupts`
+    (its exception lost on the way), before output is written."""
+    if _interrupted[0]:
+        raise Interrupted(_interrupted[0])
 
 
 def output_in_input(
@@ -234,7 +261,11 @@ class OutputSet:
             raise WriteError(f"cannot write {path}: {reason}", reason) from None
 
     def commit(self) -> None:
-        """Rename every file into place, SIGINT held back until all are."""
+        """Rename every file into place, SIGINT held back until all are; none
+        if Ctrl-C came (see :func:`raise_if_interrupted`)."""
+        if _interrupted[0]:
+            self.discard()
+            raise Interrupted(_interrupted[0])
         with _signals_held():
             done = 0
             try:
@@ -350,6 +381,7 @@ def _cannot_make_files_in(directory: Path) -> str | None:
 def output_stream(path: str | os.PathLike[str] | None) -> Iterator[IO[str]]:
     """Standard output, or a text stream whose content becomes ``path`` once the
     block ends normally (nothing is written if it raises)."""
+    raise_if_interrupted()
     if path is None or str(path) == "-":
         yield sys.stdout
         return

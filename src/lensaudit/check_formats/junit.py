@@ -11,6 +11,7 @@ root of the git repository that holds the database, as CI systems expect.
 
 from __future__ import annotations
 
+import codecs
 import re
 import xml.etree.ElementTree as ET
 from typing import TYPE_CHECKING, TextIO
@@ -87,6 +88,19 @@ def write(result: CheckResult, stream: TextIO) -> None:
             totals[key] += value
     suites.attrib.update({k: str(v) for k, v in totals.items()}, errors="0")
     ET.indent(suites)
+    document = ET.tostring(suites, encoding="unicode")
+    if not _utf8(stream):  # a terminal's own encoding: ASCII, the rest as references
+        document = document.encode("ascii", "xmlcharrefreplace").decode("ascii")
     stream.write('<?xml version="1.0" encoding="UTF-8"?>\n')
-    stream.write(ET.tostring(suites, encoding="unicode"))
+    stream.write(document)
     stream.write("\n")
+
+
+def _utf8(stream: TextIO) -> bool:
+    """Whether ``stream`` writes UTF-8 (a file written by lensaudit, a stream
+    in memory), so that the document is UTF-8 as it says it is."""
+    encoding = getattr(stream, "encoding", None)
+    try:
+        return encoding is None or codecs.lookup(encoding).name == "utf-8"
+    except LookupError:
+        return False

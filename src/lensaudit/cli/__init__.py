@@ -12,6 +12,7 @@ from importlib.util import find_spec
 import click
 
 from ..commands import os_error_message, single_blas_thread
+from ..formats import printable
 from ..version import __version__
 
 #: Subcommand name -> (module under lensaudit.cli, one-line help).
@@ -33,7 +34,8 @@ _NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 def _usage_error(ctx: click.Context, error: click.UsageError) -> None:
     """Bad usage as one line, as every other bad input, with where to read more; exit 2."""
     path = error.ctx.command_path if error.ctx is not None else ctx.command_path
-    click.echo(f"lensaudit: error: {error.format_message()} (see '{path} --help')", err=True)
+    message = printable(f"{error.format_message()} (see '{path} --help')")
+    click.echo(f"lensaudit: error: {message}", err=True)
     ctx.exit(2)
 
 

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import click
 
 from ..columns import FOLD_MARGIN
+from ..formats import printable
 from ..formats.csv_format import write_rows
 from ..formats.table import text_table
 from ..pipeline import run
@@ -303,7 +304,7 @@ def _write_table(
 
     lines = _table_heading(audit, results, settings)
     if not results:
-        stream.write("\n".join(lines) + "\n")
+        stream.write("\n".join(map(printable, lines)) + "\n")
         return
     lines.append(
         f"Changes of D in pixels of a {FRAME} frame as liblensfun applies the model to it "
@@ -316,11 +317,13 @@ def _write_table(
         "undistortion stretches the image by 1 / D')."
     )
     lines.append("")
-    lines += text_table(_TABLE_COLUMNS, _table_rows(results), right=_TABLE_RIGHT)
+    rows = [[printable(cell) for cell in row] for row in _table_rows(results)]
+    lines += text_table(_TABLE_COLUMNS, rows, right=_TABLE_RIGHT)
     lines += _table_ending(results, settings, patches, written)
-    stream.write("\n".join(lines) + "\n")
+    # Names from the database and file names must not move the terminal's cursor.
+    stream.write("\n".join(map(printable, lines)) + "\n")
     if diff:
-        stream.write("\n" + diff)
+        stream.write("\n" + "\n".join(printable(line, tabs=True) for line in diff.split("\n")))
 
 
 def _table_heading(audit: Audit, results: list[FixResult], settings: dict[str, Any]) -> list[str]:

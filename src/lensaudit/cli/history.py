@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from ..commands import cycle_collector_off, refuse_unwritable, refuse_writing_inputs
+from ..formats import printable
 from ..history import Commit, HistoryError, Revision, audit_history, trend_figure
 from ..history.commits import normalized_path
 from ..history.index import caches, key_of
@@ -132,7 +133,7 @@ def history(
             fail(str(error))
         bar.close()
         for warning in result.warnings:
-            click.echo(f"lensaudit: warning: {warning}", err=True)
+            click.echo(f"lensaudit: warning: {printable(str(warning))}", err=True)
 
         written = _write_outputs(result, output_dir, cache, trend)
     if not quiet:
@@ -274,7 +275,7 @@ def _print_summary(result, written: list[Path]) -> None:
     newest = result.newest
     last = next((r for r in reversed(result.revisions) if r.mainline), None)
     click.echo(
-        f"{result.path} in {result.repository}: {result.commits:,} commits, "
+        f"{printable(f'{result.path} in {result.repository}')}: {result.commits:,} commits, "
         f"{len(result.revisions):,} change the database"
     )
     click.echo(
@@ -291,4 +292,4 @@ def _print_summary(result, written: list[Path]) -> None:
             f"rectilinear), in the paper's units "
             f"{counts['folds_in_image_paper_units_rectilinear']} rectilinear"
         )
-    click.echo("wrote " + ", ".join(str(p) for p in written))
+    click.echo("wrote " + ", ".join(printable(str(p)) for p in written))

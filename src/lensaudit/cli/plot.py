@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from ..formats import printable
 from ..pipeline import run
 from ..read import LoadError
 from ..writing import OutputSet
@@ -124,9 +125,9 @@ def resolve_entry(
         audit = _audit(list(databases), cache)
         return audit, select.by_query(audit, query)
     except select.SelectionError as error:
-        click.echo(f"lensaudit: error: {error}, in {audit.source.label}", err=True)
+        click.echo(f"lensaudit: error: {printable(f'{error}, in {audit.source.label}')}", err=True)
         for index in error.candidates:
-            click.echo(f"  {select.describe(audit.entries[index])}", err=True)
+            click.echo(f"  {printable(select.describe(audit.entries[index]))}", err=True)
         raise SystemExit(EXIT_INPUT_ERROR) from None
 
 
@@ -138,12 +139,12 @@ def _save(figure: Any, output: Path) -> None:
             save(figure, outputs.path(output), _check_format(output))
     except OSError as error:
         fail(f"cannot write {output}: {error.strerror or error}")
-    click.echo(f"Wrote {output}")
+    click.echo(f"Wrote {printable(str(output))}")
 
 
 def _from(audit: Audit) -> None:
     """The first line: the database read."""
-    click.echo(f"lensaudit plot: {audit.source.label}")
+    click.echo(f"lensaudit plot: {printable(audit.source.label)}")
 
 
 @click.group()

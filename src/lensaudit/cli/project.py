@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import click
 
 from .. import read
+from ..formats import printable
 from ..formats.csv_format import write_rows
 from ..read import LoadError, display_path
 from ..read.records import STATUS_OK
@@ -154,7 +155,7 @@ def project(
         with output_stream(output) as stream:
             _write_pixels(pixels, valid, stream)
     if chosen:
-        click.echo(chosen, err=True)
+        click.echo(printable(chosen), err=True)
 
 
 def _check_choice(
@@ -627,4 +628,4 @@ def _write_info(camera: RadialCamera, stream: TextIO) -> None:
     rows += [("note", note) for note in camera.notes]
     width = max(len(label) for label, _ in rows)
     for label, value in rows:
-        stream.write(f"{label.ljust(width)}  {value}\n")
+        stream.write(f"{label.ljust(width)}  {printable(value)}\n")

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..commands import cycle_collector_off
+from ..formats import printable
 from ..read import LoadError
 from ..report import ReportExistsError, audit, drawing, write_report
 from ..report.writer import check_directory, planned_files
@@ -101,12 +102,14 @@ def report(
         except OSError as error:
             fail(f"cannot write the report into {output_dir}: {error.strerror or error}")
     summary = audits.distortion.summary
-    click.echo(f"lensaudit report: {audits.distortion.source.label}")
+    click.echo(f"lensaudit report: {printable(audits.distortion.source.label)}")
     click.echo(
         f"{summary.entries} entries audited, {summary.total.finite} with a finite "
         f"r_max, {len(summary.folding)} folding inside their image."
     )
     click.echo(
-        f"Wrote {len(written)} files into {output_dir}; open "
-        f"{output_dir / 'report.html'} in a browser."
+        printable(
+            f"Wrote {len(written)} files into {output_dir}; open "
+            f"{output_dir / 'report.html'} in a browser."
+        )
     )

@@ -87,9 +87,17 @@ _CONTROL = re.compile(
 )
 
 
-def printable(text: str) -> str:
-    """``text`` with control characters shown as ``\\xNN`` escapes."""
-    return _CONTROL.sub(
+# The same, but the tab: a diff's lines keep their indentation.
+_CONTROL_BUT_TAB = re.compile(
+    "[\x00-\x08\x0a-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028-\u202e\u2066-\u2069\ud800-\udfff]"
+)
+
+
+def printable(text: str, tabs: bool = False) -> str:
+    """``text`` with control characters shown as ``\\xNN`` escapes (with
+    ``tabs``, tabs kept): every text from a database, a file name or the
+    command line that reaches a terminal goes through it."""
+    return (_CONTROL_BUT_TAB if tabs else _CONTROL).sub(
         lambda m: (
             f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256 else f"\\u{ord(m.group()):04x}"
         ),

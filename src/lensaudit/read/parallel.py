@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import marshal
 import os
+import signal
 import threading
 from collections.abc import Callable, Iterator, Sequence
 
@@ -158,12 +159,36 @@ class _Queue:
         os.close(self.output)
 
 
+def fork() -> int:
+    """``os.fork()``, with Ctrl-C (SIGINT) held back in the child until it
+    calls :func:`forked`, inside the ``try`` whose ``finally`` ends it: a
+    Ctrl-C that came earlier would run the parent's code in the child."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    pid = os.fork()
+    if pid != 0:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    else:
+        _unheld[:] = [held]
+    return pid
+
+
+#: The signal mask the child of :func:`fork` restores in :func:`forked`.
+_unheld: list = []
+
+
+def forked() -> None:
+    """In the child of :func:`fork`, once it is ready: Ctrl-C as before the fork."""
+    if _unheld:
+        signal.pthread_sigmask(signal.SIG_SETMASK, _unheld.pop())
+
+
 def _fork(function: Callable[[Any], Any], items: Sequence[Any], queue: _Queue) -> tuple:
     output, output_input = os.pipe()
-    pid = os.fork()
+    pid = fork()
     if pid == 0:  # the child: take items, send what it made, leave without the parent's cleanup
         code = 1
         try:
+            forked()
             os.close(output)
             made = [(index, function(items[index])) for index in queue.taken()]
             data = marshal.dumps(made)
@@ -241,11 +266,9 @@ class Beside:
         if not self._started and can_fork():
             requests_read, requests_write = os.pipe()
             replies_read, replies_write = os.pipe()
-            pid = os.fork()
+            pid = fork()
             if pid == 0:
-                os.close(requests_write)
-                os.close(replies_read)
-                self._serve(requests_read, replies_write)
+                self._serve(requests_read, replies_write, requests_write, replies_read)
             os.close(requests_read)
             os.close(replies_write)
             self._pid, self._requests, self._replies = pid, requests_write, replies_read
@@ -313,11 +336,15 @@ class Beside:
     def __exit__(self, *_: object) -> None:
         self.stop()
 
-    def _serve(self, requests: int, replies: int) -> NoReturn:
+    def _serve(self, requests: int, replies: int, *unused: int) -> NoReturn:
         """The forked process: prepare, do the work asked for, send back what it
-        made; leave without the parent's cleanup."""
+        made; leave without the parent's cleanup (``unused``: the parent's ends
+        of the pipes, closed)."""
         code = 1
         try:
+            forked()
+            for descriptor in unused:
+                os.close(descriptor)
             import pickle
 
             if self._prepare is not None:
