@@ -26,6 +26,7 @@ from .commands import (
 from .formats import printable
 from .writing import (
     EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
     Interrupted,
     WriteError,
     catch_interrupts,
@@ -127,7 +128,8 @@ def run() -> NoReturn:
     command's exit status. Anything but an exit (a crash) takes Python's
     usual way out.
 
-    Ctrl-C at any moment ends it with "lensaudit: interrupted" and status 130:
+    Ctrl-C at any moment ends it with "lensaudit: interrupted" and status 130
+    (SIGTERM: "terminated", 143):
     while it starts (see :mod:`lensaudit`), while it runs, after its output
     (not yet flushed), and where code not lensaudit's lost the exception (see
     :func:`lensaudit.writing.catch_interrupts`).
@@ -137,14 +139,17 @@ def run() -> NoReturn:
         sys.unraisablehook = _interrupts_kept(sys.unraisablehook)
         standard_streams()
         code = dispatch(sys.argv[1:])
-        if code != EXIT_INTERRUPTED:
+        if code not in (EXIT_INTERRUPTED, EXIT_TERMINATED):
             raise_if_interrupted()
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
             except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
                 code = code or 1
-    except (Interrupted, KeyboardInterrupt):
+    except Interrupted as stop:
+        _say(f"lensaudit: {stop.message}")
+        code = stop.status
+    except KeyboardInterrupt:
         _say("lensaudit: interrupted")
         code = EXIT_INTERRUPTED
     os._exit(code)
