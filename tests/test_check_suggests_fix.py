@@ -1,5 +1,6 @@
 """Each fold that check reports names the `lensaudit fix` command that refits it,
-and that command, run as written, selects exactly that entry."""
+and that command, run as written (in the directory check ran in), selects
+exactly that entry, in the file check read: never another database's."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -24,18 +26,19 @@ def test_every_fold_in_the_image_names_a_fix_command_that_selects_it(bundled_db)
     assert folds
     for finding in folds:
         command = _suggested(finding["message"])
-        arguments = shlex.split(command)[1:] + [str(bundled_db), "--format", "json"]
+        arguments = _with_json(shlex.split(command)[1:])
+        assert arguments[-1] == finding["file"]
         fixed = CliRunner().invoke(main, arguments)
         assert fixed.exit_code == 0, fixed.output
         selected = [(e["file"], e["line"]) for e in json.loads(fixed.output)["entries"]]
-        assert selected == [(finding["file"].split("/")[-1], finding["line"])], command
+        assert selected == [(finding["file"], finding["line"])], command
 
 
 @pytest.mark.parametrize("name", ['Odd "$HOME" `x` \\ lens', "Plain 14-42mm f/3.5-5.6", "It's"])
 def test_the_suggested_lens_name_survives_a_posix_shell(name):
     entry = DistortionEntry("x.xml", 1, "Maker", name, (), "rectilinear", 1.0, 1.5, "ptlens", 11.0)
     command = re.search(
-        r"`lensaudit fix --lens (.+) --focal 11` refits it$", check._fix_suggestion(entry)
+        r"`lensaudit fix --lens (.+) --focal 11 -- x.xml` refits it$", check.fix_suggestion(entry)
     )
     if shutil.which("bash") is None:
         pytest.skip("no bash to judge the quoting")
@@ -56,6 +59,7 @@ AWKWARD = [
     "Tab\there and   many spaces",
     '=HYPERLINK("http://x") ; rm -rf / #',
     "A very long name " + "that goes on " * 12 + "and on",
+    "Bidi \u202eevil\u202c name",
 ]
 
 
@@ -77,6 +81,12 @@ def _awkward_database(tmp_path):
     path.parent.mkdir()
     path.write_text(f'<lensdatabase version="2">\n{lenses}</lensdatabase>\n', encoding="utf-8")
     return path
+
+
+def _with_json(arguments: list[str]) -> list[str]:
+    """A suggested command's arguments with ``-f json`` before its ``--``."""
+    end = arguments.index("--")
+    return [*arguments[:end], "-f", "json", *arguments[end:]]
 
 
 def _suggested(message: str) -> str:
@@ -109,9 +119,26 @@ def test_each_suggested_command_pasted_into_a_shell_selects_its_entry(tmp_path):
         words = shlex.split(command)
         assert words[:2] == ["lensaudit", "fix"], command
         fixed = subprocess.run(
-            [sys.executable, "-m", "lensaudit", *words[1:], str(path.parent), "-f", "json"],
+            [sys.executable, "-m", "lensaudit", *_with_json(words[1:])],
             capture_output=True, text=True, encoding="utf-8", check=False,
         )  # fmt: skip
         assert fixed.returncode == 0, (command, fixed.stderr)
-        selected = [(e["file"], e["line"]) for e in json.loads(fixed.stdout)["entries"]]
+        selected = [(Path(e["file"]).name, e["line"]) for e in json.loads(fixed.stdout)["entries"]]
         assert selected == [("odd.xml", line)], command
+
+
+def test_the_suggested_command_refits_the_file_checked_not_the_default_database(tmp_path):
+    path = _awkward_database(tmp_path)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (line, message), *_ = _check(path.parent, "json").items()
+    words = shlex.split(_suggested(message))
+    assert words[-2:] == ["--", str(path)]
+    fixed = subprocess.run(
+        [sys.executable, "-m", "lensaudit", *_with_json(words[1:])],
+        capture_output=True, text=True, encoding="utf-8", check=False, cwd=elsewhere,
+    )  # fmt: skip
+    assert fixed.returncode == 0, fixed.stderr
+    assert [(e["file"], e["line"]) for e in json.loads(fixed.stdout)["entries"]] == [
+        (str(path), line)
+    ]

@@ -112,7 +112,6 @@ _FROM_FINDINGS = {
     "analyse": "analyse",
     "analyse_parsed": "analyse_parsed",
     "fix_suggestion": "fix_suggestion",
-    "_fix_suggestion": "fix_suggestion",  # by the private name some callers use
 }
 
 

@@ -82,7 +82,7 @@ def metric_fields(
 # marks and overrides of bidirectional text, and lone surrogates (undecodable
 # bytes of a file name): text from a database must not move a terminal's
 # cursor, split a line, show itself in another order or fail to encode.
-_CONTROL = re.compile(
+UNPRINTABLE = re.compile(
     "[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028-\u202e\u2066-\u2069\ud800-\udfff]"
 )
 
@@ -97,7 +97,7 @@ def printable(text: str, tabs: bool = False) -> str:
     """``text`` with control characters shown as ``\\xNN`` escapes (with
     ``tabs``, tabs kept): every text from a database, a file name or the
     command line that reaches a terminal goes through it."""
-    return (_CONTROL_BUT_TAB if tabs else _CONTROL).sub(
+    return (_CONTROL_BUT_TAB if tabs else UNPRINTABLE).sub(
         lambda m: (
             f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256 else f"\\u{ord(m.group()):04x}"
         ),

@@ -10,11 +10,11 @@ it was calibrated on, and undistortion mirrors pixels beyond that radius.
 from __future__ import annotations
 
 import math
-import re
 import shlex
 from collections.abc import Iterable
 from typing import Any
 
+from ...formats import UNPRINTABLE
 from ...metrics import is_circular_fisheye
 from ...read.records import STATUS_OK, DistortionEntry
 from ..result import Finding, Identified, entry_finding
@@ -163,15 +163,19 @@ SUGGESTED_NAME_LIMIT = 100
 
 
 def fix_suggestion(entry: DistortionEntry) -> str:
-    """The ``lensaudit fix`` command that refits this entry, on the same database.
+    """The ``lensaudit fix`` command that refits this entry, in the file it
+    is in (``entry.file``, as the check names it), to paste into a POSIX
+    shell as it is printed: shell-quoted (``shlex.quote``), the file after
+    ``--`` (a name may start with a dash).
 
     ``--lens`` matches a part of the name, with runs of white space as one
     space: the command names the lens so (check prints a finding on one
-    line), up to its first control character and at most
-    :data:`SUGGESTED_NAME_LIMIT` characters, shell-quoted (``shlex.quote``),
-    so that it can be pasted into a POSIX shell as it is printed.
+    line), up to the first character a terminal is not shown as it is
+    (:data:`lensaudit.formats.UNPRINTABLE`: a control character, a
+    bidirectional mark) and at most :data:`SUGGESTED_NAME_LIMIT` characters.
     """
-    name = re.split(r"[\x00-\x1f\x7f-\x9f]", " ".join(entry.lens.split()), maxsplit=1)[0]
+    name = UNPRINTABLE.split(" ".join(entry.lens.split()), maxsplit=1)[0]
     name = name[:SUGGESTED_NAME_LIMIT].strip()
-    words = ["lensaudit", "fix", *(["--lens", name] if name else []), "--focal"]
-    return f"`{shlex.join(words)} {entry.focal:g}` refits it"
+    words = ["lensaudit", "fix", *(["--lens", name] if name else [])]
+    words += ["--focal", f"{entry.focal:g}", "--", entry.file]
+    return f"`{shlex.join(words)}` refits it"
