@@ -127,6 +127,13 @@ def test_closed_standard_output_is_one_line_and_status_2(named, words):
     assert done.stderr == b"lensaudit: error: standard output is closed\n"
 
 
+@pytest.mark.parametrize("words", [["--help"], ["-h"], ["--version"], ["check", "--help"]])
+def test_closed_standard_output_for_help_and_version_is_one_line_and_status_2(words):
+    done = in_shell(">&-", *words)
+    assert done.returncode == 2
+    assert done.stderr == b"lensaudit: error: standard output is closed\n"
+
+
 def test_closed_standard_output_is_no_error_when_the_output_is_a_file(named, tmp_path):
     target = tmp_path / "entries.csv"
     done = in_shell(">&-", "scan", "-f", "csv", "-o", str(target), str(named))

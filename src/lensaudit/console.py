@@ -12,6 +12,7 @@ output is flushed.
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 
@@ -103,6 +104,13 @@ def _dispatch(words: list[str]) -> int:
         main(words)  # click's standalone mode: always ends in SystemExit
     except SystemExit as end:
         return _status(end.code)
+    except OSError as error:
+        # Standard output closed, written to before any command runs
+        # (--help, --version): the commands say so themselves.
+        if error.errno != errno.EBADF:
+            raise
+        _say(f"lensaudit: error: {error.strerror}")
+        return EXIT_INPUT_ERROR
     return 0
 
 
