@@ -57,7 +57,7 @@ QUOTED_LIMIT = 40
 #: A quoted value longer than QUOTED_LIMIT: its opening quote follows no letter
 #: or digit, so that the apostrophe of "master's" opens nothing.
 _QUOTED = re.compile(rf"(?<!\w)'([^']{{{QUOTED_LIMIT}}})[^']{{2,}}'")
-#: Where a message ends with a command to paste (``lensaudit.check.findings.fix_suggestion``):
+#: Where a message ends with a command to paste (``lensaudit.check.rules.fold.fix_suggestion``):
 #: :func:`clip` keeps it byte for byte.
 COMMAND_MARK = "`lensaudit fix "
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from types import ModuleType
 from typing import Any
@@ -90,7 +90,6 @@ class Context:
     verbose: bool
     known: Any = None  # lensaudit.check.known.Known, what a baseline holds
     solved: Sequence[tuple[list, list[float]]] | None = None
-    _memo: dict = field(default_factory=dict, repr=False)
 
     @cached_property
     def entries(self) -> list[tuple[int, Any]]:

@@ -20,7 +20,7 @@ from collections.abc import Iterable
 from ..matching import lens_identity
 from ..result import Finding, Identified, clip, clip_key, lens_name
 from . import WARNING, Context, Rule
-from .undefined_mount import is_fixed_lens_mount, mount_key
+from .undefined_mount import is_fixed_lens_mount, mount_key, mount_uses
 
 ORDER = 125
 ACROSS_FILES = True
@@ -56,11 +56,10 @@ def find(context: Context) -> Iterable[tuple[int, Identified]]:
     """Each fixed lens whose crop factor no camera of its mount has."""
     cameras: dict[str, list[tuple[float, str]]] = {}
     for file in context.read:
-        for camera in file.tables.cameras:
-            crop = _number(camera.crop_text)
-            if crop > 0:
-                for mount in camera.mounts:
-                    cameras.setdefault(mount_key(mount), []).append((crop, camera.model))
+        for use in mount_uses(file):  # a camera's mount is its last, as liblensfun reads it
+            crop = _number(use.crop_text)
+            if use.kind == "camera" and crop > 0:
+                cameras.setdefault(mount_key(use.mount), []).append((crop, use.model))
     if not cameras:
         return
     for index, file in enumerate(context.read):

@@ -26,9 +26,12 @@ MISSING_ATTRIBUTE = Rule(
     "missing-attribute",
     ERROR,
     "entry",
-    "an element without model= or focal=",
-    "a `<distortion>` without `model=` or `focal=`",
-    "liblensfun cannot place an entry without its model or focal length.",
+    "an element without an attribute it needs (model=, focal=; a <vignetting>'s "
+    "aperture= and distance=)",
+    "a `<distortion>`, `<tca>` or `<vignetting>` without an attribute it needs: `model=`, "
+    "`focal=`, and for `<vignetting>` `aperture=` and `distance=`",
+    "liblensfun cannot place an entry without its model, its focal length or, for "
+    "vignetting, its aperture and distance.",
     fails=(
         "slr-pentax.xml:851 at Lensfun f0e72d7, smc Pentax-FA 50mm f/1.4: a <vignetting> "
         "without distance="

@@ -73,7 +73,7 @@ def liblensfun_refusals(file: ParsedSource) -> Iterable[Identified]:
     message = clip(
         f"liblensfun (Lensfun master's) stops reading at line {line}: {reason}; "
         f"{_lenses(lost)} from there on {'are' if lost != 1 else 'is'} lost to its users"
-        f" (it keeps the {_lenses(kept)} before)"
+        + (f" (it keeps the {_lenses(kept)} before)" if kept else " (it keeps no lens before)")
     )
     rule = LIBLENSFUN_REFUSES
     finding = Finding(rule.severity, rule.code, file.source.display, line, 0, message)
