@@ -26,7 +26,7 @@ from hypothesis import given, settings
 
 from conftest import FOLDING_LENS, clone_history, git_repository, no_child_left
 from damage import FLIPS, flipped
-from history_blobs import file_versions
+from history_blobs import file_versions, read_alone
 from lensaudit import read
 from lensaudit.cli import main
 from lensaudit.history import (
@@ -1075,8 +1075,7 @@ def summaries_by_piece(contents: list[bytes]) -> tuple[int, list[int]]:
     summary then differs from the summary of the whole file."""
     pieces, memo, solved = read.Pieces(), {}, {}
     by_pieces, wrong = 0, []
-    for number, data in enumerate(contents):
-        tables = read.read_bytes(data, "f.xml")
+    for number, (data, tables) in enumerate(zip(contents, read_alone(contents), strict=True)):
         whole = versions_stage.summarize(tables, file_metrics(tables, None))
         rows = read.read_pieces(data, pieces)
         if rows is None:
