@@ -178,6 +178,7 @@ def test_every_failure_named_is_a_failure_of_liblensfun_at_that_radius(database)
             assert abs(first - named) <= 2, (entries[index], first, named)
 
 
+@pytest.mark.exhaustive
 def test_no_entry_said_to_invert_fails_in_liblensfun(database):
     entries, found = database
     fine = [e for e, fails in zip(entries, found.fails.tolist(), strict=True) if not fails]
