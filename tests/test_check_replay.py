@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import importlib.util
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -61,6 +60,15 @@ NEIGHBOURS = (
     "03d3b33",
 )
 
+#: Commits that add a lens twin of an existing one, above it in the file or
+#: by a merge: the duplicate must be reported on the lens the commit added.
+ADDED_TWINS = {
+    "f206332": ("duplicate-lens", "mil-sigma.xml"),  # a second Sigma 19mm f/2.8 EX DN above
+    "b73f02a": ("duplicate-lens", "slr-canon.xml"),  # a merge adds a second EF 50mm f/1.4
+}
+#: A commit whose baseline has a file liblensfun already refused (see its test).
+REFUSAL_KNOWN = "04906284"
+
 
 def load_replay():
     spec = importlib.util.spec_from_file_location(
@@ -76,27 +84,33 @@ replay_check = load_replay()
 
 
 @pytest.fixture(scope="module")
-def history(tmp_path_factory) -> Path:
-    """A clone of the Lensfun history bundle."""
-    clone = tmp_path_factory.mktemp("history") / "lensfun"
-    subprocess.run(
-        ["git", "clone", "--quiet", "--no-checkout", str(BUNDLE), str(clone)],
-        check=True,
-        capture_output=True,
-    )
-    return clone
+def history(lensfun_head) -> Path:
+    """The session's clone of the Lensfun history bundle."""
+    return lensfun_head.parents[1]
 
 
 @pytest.fixture(scope="module")
-def verdicts(history, tmp_path_factory) -> dict[str, replay_check.Row]:
-    """Each replayed commit's row, by the short id used above, oldest first."""
+def replayed(history) -> dict[str, replay_check.Row]:
+    """The row of each commit named here, by the short id used here, all
+    replayed at once: the window's oldest first, then the others."""
     names = [*REAL_CATCHES, *MUST_PASS, *NEIGHBOURS]
     full = {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in names}
     order = replay_check.window(history, None, None, ())  # the last 300, oldest first
     commits = [c for c in order if c in full.values()]
     assert len(commits) == len(names)
+    for name in [*ADDED_TWINS, REFUSAL_KNOWN]:
+        full[name] = replay_check.git(history, "rev-parse", name).decode().strip()
+        commits.append(full[name])
     short = {commit: name for name, commit in full.items()}
     return {short[row.commit]: row for row in replay_check.replay(history, commits)}
+
+
+@pytest.fixture(scope="module")
+def verdicts(replayed) -> dict[str, replay_check.Row]:
+    """Each replayed commit's row of the window, by the short id used above, oldest first."""
+    return {
+        name: row for name, row in replayed.items() if name not in [*ADDED_TWINS, REFUSAL_KNOWN]
+    }
 
 
 @pytest.fixture(scope="module")
@@ -184,19 +198,10 @@ def test_a_finding_is_justified_by_its_own_place_not_by_another():
     assert not replay_check.justified([("db/a.xml", 3)], False, touched, blocks)
 
 
-#: Commits that add a lens twin of an existing one, above it in the file or
-#: by a merge: the duplicate must be reported on the lens the commit added.
-ADDED_TWINS = {
-    "f206332": ("duplicate-lens", "mil-sigma.xml"),  # a second Sigma 19mm f/2.8 EX DN above
-    "b73f02a": ("duplicate-lens", "slr-canon.xml"),  # a merge adds a second EF 50mm f/1.4
-}
-
-
 @needs_history
 @pytest.mark.parametrize("commit", sorted(ADDED_TWINS))
-def test_a_duplicate_points_at_the_lens_the_commit_added(history, commit):
-    full = replay_check.git(history, "rev-parse", commit).decode().strip()
-    (row,) = replay_check.replay(history, [full])
+def test_a_duplicate_points_at_the_lens_the_commit_added(replayed, commit):
+    row = replayed[commit]
     assert row.verdict == replay_check.FAIL_JUSTIFIED, row.findings
     code, name = ADDED_TWINS[commit]
     assert any(f.startswith(f"{code} {name}:") for f in row.findings), row.findings
@@ -210,11 +215,10 @@ def test_a_file_level_finding_is_justified_by_any_change_to_its_file():
 
 
 @needs_history
-def test_a_refusal_the_broken_baseline_file_had_is_known(history):
+def test_a_refusal_the_broken_baseline_file_had_is_known(replayed):
     """04906284 adds a Fujifilm X20 to another file; compact-sony.xml was
     already not well-formed, and liblensfun already stopped reading it at
     line 774: the baseline file replaced by its last readable version still
     counts both of its file-level findings."""
-    full = replay_check.git(history, "rev-parse", "04906284").decode().strip()
-    (row,) = replay_check.replay(history, [full])
+    row = replayed[REFUSAL_KNOWN]
     assert row.verdict == replay_check.PASS, row.findings
