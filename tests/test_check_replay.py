@@ -14,9 +14,14 @@ length), with a commit on each side of every one of them.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import os
+import pickle
 import shutil
 import sys
+import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -89,20 +94,75 @@ def history(lensfun_head) -> Path:
     return lensfun_head.parents[1]
 
 
+def beside(work: Callable[[], object]) -> Callable[[], object]:
+    """Start ``work()`` in a forked process, where ``os.fork`` exists (else do
+    it now), so that it runs while this process goes on; the function
+    returned waits for it and returns what it returned."""
+    if not hasattr(os, "fork"):
+        done = work()
+        return lambda: done
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: the work, its result (or its error) down the pipe, and out
+        try:
+            os.close(read_end)
+            try:
+                answer = (True, work())
+            except BaseException:  # noqa: B036 - told to the parent, which raises it
+                answer = (False, traceback.format_exc())
+            with os.fdopen(write_end, "wb") as stream:
+                pickle.dump(answer, stream)
+        finally:
+            os._exit(0)
+    os.close(write_end)
+
+    def wait() -> object:
+        with os.fdopen(read_end, "rb") as stream:
+            data = stream.read()
+        os.waitpid(pid, 0)
+        ok, value = pickle.loads(data) if data else (False, "the forked process died")
+        assert ok, value
+        return value
+
+    return wait
+
+
 @pytest.fixture(scope="module")
-def replayed(history) -> dict[str, replay_check.Row]:
-    """The row of each commit named here, by the short id used here, all
-    replayed at once: the window's oldest first, then the others."""
+def replays(history, tmp_path_factory) -> tuple[dict, dict]:
+    """(rows, cached rows) by the short ids used here: every commit named here
+    replayed (the window's oldest first, then the others), and meanwhile, in
+    a forked process, the window's again with lensaudit's cache, as a CI job
+    keeping it would."""
     names = [*REAL_CATCHES, *MUST_PASS, *NEIGHBOURS]
     full = {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in names}
     order = replay_check.window(history, None, None, ())  # the last 300, oldest first
     commits = [c for c in order if c in full.values()]
     assert len(commits) == len(names)
-    for name in [*ADDED_TWINS, REFUSAL_KNOWN]:
-        full[name] = replay_check.git(history, "rev-parse", name).decode().strip()
-        commits.append(full[name])
+    cache = tmp_path_factory.mktemp("replay-cache")
+
+    def cached() -> list[replay_check.Row]:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("LENSAUDIT_CACHE_DIR", str(cache))
+            return list(replay_check.replay(history, commits, cache=True))
+
+    wait = beside(cached)
+    others = [*ADDED_TWINS, REFUSAL_KNOWN]
+    full |= {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in others}
     short = {commit: name for name, commit in full.items()}
-    return {short[row.commit]: row for row in replay_check.replay(history, commits)}
+    try:
+        rows = replay_check.replay(history, commits + [full[name] for name in others])
+        found = {short[row.commit]: row for row in rows}
+    except BaseException:
+        with contextlib.suppress(BaseException):
+            wait()  # no child outlives the fixture
+        raise
+    return found, {short[row.commit]: row for row in wait()}
+
+
+@pytest.fixture(scope="module")
+def replayed(replays) -> dict[str, replay_check.Row]:
+    """The row of each commit named here, by the short id used here."""
+    return replays[0]
 
 
 @pytest.fixture(scope="module")
@@ -114,14 +174,9 @@ def verdicts(replayed) -> dict[str, replay_check.Row]:
 
 
 @pytest.fixture(scope="module")
-def cached_verdicts(history, verdicts, tmp_path_factory) -> dict[str, replay_check.Row]:
-    """The same commits replayed with lensaudit's cache, as a CI job keeping it would."""
-    names = list(verdicts)
-    full = {replay_check.git(history, "rev-parse", n).decode().strip(): n for n in names}
-    order = [c for c in replay_check.window(history, None, None, ()) if c in full]
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("LENSAUDIT_CACHE_DIR", str(tmp_path_factory.mktemp("replay-cache")))
-        return {full[row.commit]: row for row in replay_check.replay(history, order, cache=True)}
+def cached_verdicts(replays) -> dict[str, replay_check.Row]:
+    """The window's commits replayed with lensaudit's cache, as a CI job keeping it would."""
+    return replays[1]
 
 
 @needs_history
