@@ -127,6 +127,15 @@ def lensfun_head(tmp_path_factory) -> Path:
     return clone_history(tmp_path_factory.mktemp("head")) / "data" / "db"
 
 
+@pytest.fixture(scope="session")
+def lensfun_head_history(lensfun_head: Path):
+    """``audit_history`` of the whole of Lensfun's history (the clone of
+    :func:`lensfun_head`), made once for the tests that read it."""
+    from lensaudit.history import audit_history
+
+    return audit_history(lensfun_head.parents[1])
+
+
 #: A one-lens database whose poly3 entry folds inside its image (line 10).
 FOLDING_LENS = lens_xml('<distortion model="poly3" focal="16" k1="-0.11"/>')
 

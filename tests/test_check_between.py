@@ -129,7 +129,8 @@ def sampled_folds(database: Path) -> set[tuple[str, int]]:
     interpolated model, sampled at 41 focal lengths (lensaudit.interpolation,
     held to liblensfun in test_interpolation.py), folds inside the image."""
     audit = run(str(database))
-    found = set()
+    # The sampled rows of each interval, by what r_normalized_at takes besides them.
+    sampled: dict[tuple, list[tuple[np.ndarray, tuple[str, int]]]] = {}
     for calibrations in zooms.calibration_sets(audit):
         focals = calibrations.focals
         table = [
@@ -138,19 +139,25 @@ def sampled_folds(database: Path) -> set[tuple[str, int]]:
         ]
         distinct = sorted(set(focals))
         for low, high in zip(distinct, distinct[1:], strict=False):
-            at = np.linspace(low, high, 43)[1:-1]
-            rows = np.array([interpolated(table, focals, float(f)) for f in at])
-            values = zooms.r_normalized_at(
-                calibrations.model, rows, calibrations.aspect_ratio, calibrations.image_radius
-            )
             ends = [
                 next(i for i in calibrations.indices if audit.entries[i].focal == f)
                 for f in (low, high)
             ]
             if any(audit.metrics.r_normalized[i] < 1 for i in ends):
                 continue
-            if np.nanmin(values) < 1:
-                found.add((Path(audit.entries[ends[0]].file).name, audit.entries[ends[0]].line))
+            at = np.linspace(low, high, 43)[1:-1]
+            rows = np.array([interpolated(table, focals, float(f)) for f in at])
+            key = (calibrations.model, calibrations.aspect_ratio, calibrations.image_radius)
+            place = (Path(audit.entries[ends[0]].file).name, audit.entries[ends[0]].line)
+            sampled.setdefault(key, []).append((rows, place))
+    found = set()
+    for key, intervals in sampled.items():
+        # Each row's r_normalized is its own: the rows of many intervals in one call.
+        values = zooms.r_normalized_at(key[0], np.concatenate([r for r, _ in intervals]), *key[1:])
+        ends = np.cumsum([len(rows) for rows, _ in intervals])[:-1]
+        for (_, place), part in zip(intervals, np.split(values, ends), strict=True):
+            if np.nanmin(part) < 1:
+                found.add(place)
     return found
 
 

@@ -14,10 +14,14 @@ length), with a commit on each side of every one of them.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import os
+import pickle
 import shutil
-import subprocess
 import sys
+import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -61,6 +65,15 @@ NEIGHBOURS = (
     "03d3b33",
 )
 
+#: Commits that add a lens twin of an existing one, above it in the file or
+#: by a merge: the duplicate must be reported on the lens the commit added.
+ADDED_TWINS = {
+    "f206332": ("duplicate-lens", "mil-sigma.xml"),  # a second Sigma 19mm f/2.8 EX DN above
+    "b73f02a": ("duplicate-lens", "slr-canon.xml"),  # a merge adds a second EF 50mm f/1.4
+}
+#: A commit whose baseline has a file liblensfun already refused (see its test).
+REFUSAL_KNOWN = "04906284"
+
 
 def load_replay():
     spec = importlib.util.spec_from_file_location(
@@ -76,38 +89,94 @@ replay_check = load_replay()
 
 
 @pytest.fixture(scope="module")
-def history(tmp_path_factory) -> Path:
-    """A clone of the Lensfun history bundle."""
-    clone = tmp_path_factory.mktemp("history") / "lensfun"
-    subprocess.run(
-        ["git", "clone", "--quiet", "--no-checkout", str(BUNDLE), str(clone)],
-        check=True,
-        capture_output=True,
-    )
-    return clone
+def history(lensfun_head) -> Path:
+    """The session's clone of the Lensfun history bundle."""
+    return lensfun_head.parents[1]
+
+
+def beside(work: Callable[[], object]) -> Callable[[], object]:
+    """Start ``work()`` in a forked process, where ``os.fork`` exists (else do
+    it now), so that it runs while this process goes on; the function
+    returned waits for it and returns what it returned."""
+    if not hasattr(os, "fork"):
+        done = work()
+        return lambda: done
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: the work, its result (or its error) down the pipe, and out
+        try:
+            os.close(read_end)
+            try:
+                answer = (True, work())
+            except BaseException:  # noqa: B036 - told to the parent, which raises it
+                answer = (False, traceback.format_exc())
+            with os.fdopen(write_end, "wb") as stream:
+                pickle.dump(answer, stream)
+        finally:
+            os._exit(0)
+    os.close(write_end)
+
+    def wait() -> object:
+        with os.fdopen(read_end, "rb") as stream:
+            data = stream.read()
+        os.waitpid(pid, 0)
+        ok, value = pickle.loads(data) if data else (False, "the forked process died")
+        assert ok, value
+        return value
+
+    return wait
 
 
 @pytest.fixture(scope="module")
-def verdicts(history, tmp_path_factory) -> dict[str, replay_check.Row]:
-    """Each replayed commit's row, by the short id used above, oldest first."""
+def replays(history, tmp_path_factory) -> tuple[dict, dict]:
+    """(rows, cached rows) by the short ids used here: every commit named here
+    replayed (the window's oldest first, then the others), and meanwhile, in
+    a forked process, the window's again with lensaudit's cache, as a CI job
+    keeping it would."""
     names = [*REAL_CATCHES, *MUST_PASS, *NEIGHBOURS]
     full = {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in names}
     order = replay_check.window(history, None, None, ())  # the last 300, oldest first
     commits = [c for c in order if c in full.values()]
     assert len(commits) == len(names)
+    cache = tmp_path_factory.mktemp("replay-cache")
+
+    def cached() -> list[replay_check.Row]:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("LENSAUDIT_CACHE_DIR", str(cache))
+            return list(replay_check.replay(history, commits, cache=True))
+
+    wait = beside(cached)
+    others = [*ADDED_TWINS, REFUSAL_KNOWN]
+    full |= {name: replay_check.git(history, "rev-parse", name).decode().strip() for name in others}
     short = {commit: name for name, commit in full.items()}
-    return {short[row.commit]: row for row in replay_check.replay(history, commits)}
+    try:
+        rows = replay_check.replay(history, commits + [full[name] for name in others])
+        found = {short[row.commit]: row for row in rows}
+    except BaseException:
+        with contextlib.suppress(BaseException):
+            wait()  # no child outlives the fixture
+        raise
+    return found, {short[row.commit]: row for row in wait()}
 
 
 @pytest.fixture(scope="module")
-def cached_verdicts(history, verdicts, tmp_path_factory) -> dict[str, replay_check.Row]:
-    """The same commits replayed with lensaudit's cache, as a CI job keeping it would."""
-    names = list(verdicts)
-    full = {replay_check.git(history, "rev-parse", n).decode().strip(): n for n in names}
-    order = [c for c in replay_check.window(history, None, None, ()) if c in full]
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("LENSAUDIT_CACHE_DIR", str(tmp_path_factory.mktemp("replay-cache")))
-        return {full[row.commit]: row for row in replay_check.replay(history, order, cache=True)}
+def replayed(replays) -> dict[str, replay_check.Row]:
+    """The row of each commit named here, by the short id used here."""
+    return replays[0]
+
+
+@pytest.fixture(scope="module")
+def verdicts(replayed) -> dict[str, replay_check.Row]:
+    """Each replayed commit's row of the window, by the short id used above, oldest first."""
+    return {
+        name: row for name, row in replayed.items() if name not in [*ADDED_TWINS, REFUSAL_KNOWN]
+    }
+
+
+@pytest.fixture(scope="module")
+def cached_verdicts(replays) -> dict[str, replay_check.Row]:
+    """The window's commits replayed with lensaudit's cache, as a CI job keeping it would."""
+    return replays[1]
 
 
 @needs_history
@@ -184,19 +253,10 @@ def test_a_finding_is_justified_by_its_own_place_not_by_another():
     assert not replay_check.justified([("db/a.xml", 3)], False, touched, blocks)
 
 
-#: Commits that add a lens twin of an existing one, above it in the file or
-#: by a merge: the duplicate must be reported on the lens the commit added.
-ADDED_TWINS = {
-    "f206332": ("duplicate-lens", "mil-sigma.xml"),  # a second Sigma 19mm f/2.8 EX DN above
-    "b73f02a": ("duplicate-lens", "slr-canon.xml"),  # a merge adds a second EF 50mm f/1.4
-}
-
-
 @needs_history
 @pytest.mark.parametrize("commit", sorted(ADDED_TWINS))
-def test_a_duplicate_points_at_the_lens_the_commit_added(history, commit):
-    full = replay_check.git(history, "rev-parse", commit).decode().strip()
-    (row,) = replay_check.replay(history, [full])
+def test_a_duplicate_points_at_the_lens_the_commit_added(replayed, commit):
+    row = replayed[commit]
     assert row.verdict == replay_check.FAIL_JUSTIFIED, row.findings
     code, name = ADDED_TWINS[commit]
     assert any(f.startswith(f"{code} {name}:") for f in row.findings), row.findings
@@ -210,11 +270,10 @@ def test_a_file_level_finding_is_justified_by_any_change_to_its_file():
 
 
 @needs_history
-def test_a_refusal_the_broken_baseline_file_had_is_known(history):
+def test_a_refusal_the_broken_baseline_file_had_is_known(replayed):
     """04906284 adds a Fujifilm X20 to another file; compact-sony.xml was
     already not well-formed, and liblensfun already stopped reading it at
     line 774: the baseline file replaced by its last readable version still
     counts both of its file-level findings."""
-    full = replay_check.git(history, "rev-parse", "04906284").decode().strip()
-    (row,) = replay_check.replay(history, [full])
+    row = replayed[REFUSAL_KNOWN]
     assert row.verdict == replay_check.PASS, row.findings

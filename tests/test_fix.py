@@ -673,17 +673,17 @@ def test_a_fisheye_judged_against_the_frame_corner_is_told_about_image_circles(t
 
 def exact_smallest_slope(d: sympy.Poly, reach: sympy.Expr) -> sympy.Expr:
     """The smallest D' from 0 to where D first reaches ``reach`` (an algebraic
-    number): D rises until its first critical point, so that radius is found
-    by bisection with exact comparisons, to 1e-40."""
+    number whose square is rational): D rises from 0 until its first critical
+    point, so that radius is the first positive root of D^2 - reach^2, isolated
+    exactly (sympy's continued fractions on rationals) to within 1e-40."""
     slope = d.diff(R)
     fold = [root for root in sympy.real_roots(slope) if root > 0]
-    low, high = sympy.Integer(0), min(fold) if fold else sympy.Integer(1)
-    while not fold and d.eval(high) < reach:
-        high *= 2
-    assert d.eval(high) >= reach
-    while high - low > sympy.Rational(1, 10**40):
-        middle = (low + high) / 2
-        low, high = (middle, high) if d.eval(middle) < reach else (low, middle)
+    if fold:
+        assert d.eval(min(fold)) >= reach
+    crossing = d**2 - sympy.Rational(reach**2)
+    (low, high), _ = crossing.intervals(eps=sympy.Rational(1, 10**40), inf=0)[0]
+    assert 0 <= low and high - low <= sympy.Rational(1, 10**40)
+    assert not fold or low <= min(fold)
     points = [sympy.Integer(0), high] + [
         root for root in sympy.real_roots(slope.diff(R)) if 0 < root < high
     ]

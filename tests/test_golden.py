@@ -16,21 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from conftest import HISTORY_BUNDLE
-
 GOLDEN = Path(__file__).parent / "golden"
 
 
 @pytest.fixture(scope="module")
-def captured(bundled_db: Path, tmp_path_factory) -> dict:
-    if not HISTORY_BUNDLE.is_file():
-        pytest.skip(f"no Lensfun history bundle at {HISTORY_BUNDLE}")
-    clone = tmp_path_factory.mktemp("golden") / "lensfun"
-    subprocess.run(
-        ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)],
-        check=True,
-        capture_output=True,
-    )
+def captured(bundled_db: Path, lensfun_head: Path) -> dict:
+    clone = lensfun_head.parents[1]  # the session's clone of the history bundle
     result = subprocess.run(
         [sys.executable, str(GOLDEN / "capture.py"), str(bundled_db), str(clone)],
         capture_output=True,
