@@ -452,6 +452,8 @@ def _bracket(at_most: Callable[[int], bool], estimate: float) -> tuple[int, int]
 def _degrees(c: FloatArray) -> NDArray[np.int64]:
     """Index of the highest nonzero coefficient plus one: the degree of p (0 if none)."""
     nonzero = c != 0
+    if c.shape[1] == 0:
+        return np.zeros(c.shape[0], dtype=np.int64)
     last = c.shape[1] - np.argmax(nonzero[:, ::-1], axis=1)
     return np.where(nonzero.any(axis=1), last, 0)
 
@@ -481,7 +483,7 @@ def first_sign_change_paths(coefficients: ArrayLike) -> tuple[FloatArray, NDArra
     arithmetic. For benchmarks and tests of the solver itself.
     """
     c = np.array(coefficients, dtype=np.float64, ndmin=2)
-    c = c.reshape(-1, c.shape[-1])
+    c = c.reshape(math.prod(c.shape[:-1]), c.shape[-1])
     result = np.full(c.shape[0], np.inf)
     path = np.full(c.shape[0], _CONSTANT, dtype=np.int8)
     with np.errstate(all="ignore"):
