@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from lensaudit.fold import first_fold, opencv_fisheye_fold
 from lensaudit.normalizer import as_polynomial, opencv_fisheye, poly5, ptlens
-from lensaudit.solver import min_positive_root
+from lensaudit.solver import min_positive_root, polynomial
 from lensaudit.solver.polynomial import (
     PATHS,
     exact_first_sign_change,
@@ -198,6 +198,19 @@ def lens_k(size: float) -> st.SearchStrategy[float]:
 
 
 @st.composite
+def four_positive_roots(draw) -> tuple[float, ...]:
+    """(1 - w/r1)(1 - w/r2)(1 - w/r3)(1 - w/r4), 0 < r1 < ... < r4 apart, rounded: the
+    first of two folds, with an unfold between."""
+    scale = Fraction(2) ** draw(st.integers(-240, 240))
+    gaps = [
+        Fraction(draw(st.integers(1, 1000)), draw(st.sampled_from([10, 1000, 10**6])))
+        for _ in range(4)
+    ]
+    roots = [scale * sum(gaps[: i + 1]) for i in range(4)]
+    return expand(*[[Fraction(1), -1 / r] for r in roots])
+
+
+@st.composite
 def realistic_fisheye(draw) -> tuple[float, ...]:
     """OpenCV fisheye k1 ... k4 of the sizes Gyroflow's profiles have, as 3k1 ... 9k4."""
     k = [draw(lens_k(size)) for size in (2.0, 20.0, 200.0, 400.0)]
@@ -250,6 +263,12 @@ def test_clustered_roots(coefficients):
     check_solver(coefficients)
 
 
+@settings(max_examples=100, deadline=None)
+@given(four_positive_roots())
+def test_four_positive_roots(coefficients):
+    check_solver(coefficients)
+
+
 @settings(max_examples=200, deadline=None)
 @given(realistic_fisheye())
 def test_realistic_fisheye_derivatives(coefficients):
@@ -260,6 +279,58 @@ def test_realistic_fisheye_derivatives(coefficients):
 @given(st.one_of(quartics(), repeated_roots(), clustered_roots(), plus_minus_plus()))
 def test_the_exact_path_is_correctly_rounded(coefficients):
     check(coefficients, exact_first_sign_change(coefficients), correctly_rounded=True)
+
+
+# -- the certificate, whatever its approximations ---------------------------------------
+
+
+def careless(approximate_roots, newton, seed: int):
+    """Stand-ins for the fast path's approximations that are often wrong: roots
+    perturbed and shuffled, Newton's result nudged by ulps or started far off."""
+    rng = np.random.default_rng(seed)
+
+    def roots(C):
+        z = approximate_roots(C)
+        level = rng.choice([0.0, 1e-15, 1e-12, 1e-9, 1e-4, 0.3], size=(z.shape[0], 1))
+        z = z * (1 + level * rng.normal(size=z.shape))
+        # One root per row sometimes mirrored, turned off the real axis, or
+        # replaced by a copy of another.
+        rows = np.flatnonzero(rng.random(z.shape[0]) < 0.4)
+        first, other = rng.integers(0, z.shape[1], size=(2, rows.size))
+        how = rng.integers(0, 3, size=rows.size)
+        turned = z[rows, first] * (1 + 1j * rng.choice([1e-9, 1e-4, 0.1], size=rows.size))
+        copied = z[rows, other] * (1 + 1e-6)
+        z[rows, first] = np.where(how == 0, -z[rows, first], np.where(how == 1, turned, copied))
+        return z[:, rng.permutation(z.shape[1])]
+
+    def nudged(C, start, low, high):
+        far = rng.random(start.shape) < 0.3
+        start = np.where(far, start * rng.choice([0.5, 1.5, 3.0], start.shape), start)
+        v = newton(C, start, np.where(far, 0.0, low), np.where(far, np.inf, high))
+        ulps = rng.choice([0, 0, 1, -1, 2, -2, 1000], size=v.shape)
+        return v + ulps * np.spacing(v)
+
+    return roots, nudged
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.one_of(
+        repeated_roots(),
+        clustered_roots(),
+        plus_minus_plus(),
+        tangent_with_pair(),
+        four_positive_roots(),
+        realistic_fisheye(),
+    ),
+    st.integers(0, 2**32),
+)
+def test_a_proven_answer_is_right_whatever_the_approximations(coefficients, seed):
+    with pytest.MonkeyPatch.context() as patch:
+        roots, nudged = careless(polynomial._approximate_roots, polynomial._newton, seed)
+        patch.setattr(polynomial, "_approximate_roots", roots)
+        patch.setattr(polynomial, "_newton", nudged)
+        check_solver(coefficients)
 
 
 # -- cases -------------------------------------------------------------------------------
