@@ -22,9 +22,9 @@ import sympy
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from lensaudit.fold import first_fold, opencv_fisheye_fold
 from lensaudit.normalizer import as_polynomial, opencv_fisheye, poly5, ptlens
 from lensaudit.solver import min_positive_root, polynomial
+from lensaudit.solver.fold import first_fold, opencv_fisheye_fold
 from lensaudit.solver.polynomial import (
     PATHS,
     exact_first_sign_change,

@@ -49,7 +49,7 @@ class Polynomial:
     ``slope_at_centre`` is D'(0) and ``distortion`` the coefficients of D(r)
     in r, highest power first, as in :class:`Cubic`. A model is this
     description and nothing more: the one solver finds its fold
-    (:func:`lensaudit.fold.first_fold`).
+    (:func:`lensaudit.solver.fold.first_fold`).
     """
 
     coefficients: FloatArray

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .normalizer import Polynomial, opencv_fisheye
-from .solver.arrays import _two_product, _two_sum
-from .solver.polynomial import first_sign_change
+from ..normalizer import Polynomial, opencv_fisheye
+from .arrays import _two_product, _two_sum
+from .polynomial import first_sign_change
 
 FloatArray = NDArray[np.float64]
 
