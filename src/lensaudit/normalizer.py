@@ -1,11 +1,13 @@
-"""Map distortion models onto the cubic 1 + a w + b w^2 + c w^3 whose roots bound r_max.
+"""Map distortion models onto the polynomial 1 + c1 w + ... + cn w^n whose roots bound r_max.
 
 For a radial model D(r) = r F(r), the first local maximum of D is the first
-positive root of D'(r) at which D' changes sign. For every model here D'(r),
+positive root of D'(r) at which D' changes sign. For every Lensfun model here D'(r),
 divided by its constant term D'(0), is a cubic in w, with w = r (ptlens, the
 basic polynomial) or w = r^2 (poly3, poly5, Brown-Conrady). This module gives
 that cubic (paper Eqs. 26-28, 5 and 6) together with D itself, so that the
-solver and the metrics share one description of each model.
+solver and the metrics share one description of each model. OpenCV's
+fisheye model (Gyroflow) is a quartic in w = theta^2: a :class:`Polynomial`,
+the general description, of which :func:`as_polynomial` makes any cubic one.
 
 All functions are vectorized: coefficients may be scalars or numpy arrays.
 """
@@ -36,6 +38,51 @@ class Cubic:
     power: int
     slope_at_centre: FloatArray
     distortion: FloatArray
+
+
+@dataclass(frozen=True)
+class Polynomial:
+    """D'(r) / D'(0) = 1 + c1 w + ... + cn w^n, with w = r**power: a model's description.
+
+    ``coefficients`` holds c1 ... cn along its last axis, lowest power first,
+    as :func:`lensaudit.solver.polynomial.first_sign_change` takes them;
+    ``slope_at_centre`` is D'(0) and ``distortion`` the coefficients of D(r)
+    in r, highest power first, as in :class:`Cubic`. A model is this
+    description and nothing more: the one solver finds its fold
+    (:func:`lensaudit.solver.fold.first_fold`).
+    """
+
+    coefficients: FloatArray
+    power: int
+    slope_at_centre: FloatArray
+    distortion: FloatArray
+
+
+def as_polynomial(cubic: Cubic) -> Polynomial:
+    """The cubic 1 + a w + b w^2 + c w^3 as a :class:`Polynomial` (n = 3)."""
+    coefficients = np.stack(np.broadcast_arrays(cubic.a, cubic.b, cubic.c), axis=-1)
+    return Polynomial(coefficients, cubic.power, cubic.slope_at_centre, cubic.distortion)
+
+
+def opencv_fisheye(k1: ArrayLike, k2: ArrayLike, k3: ArrayLike, k4: ArrayLike) -> Polynomial:
+    """OpenCV's fisheye model, Gyroflow's lens profiles: theta_d = theta (1 + k1 theta^2 + k2
+    theta^4 + k3 theta^6 + k4 theta^8).
+
+    theta is the angle from the optical axis and theta_d the distorted one, in
+    radians (a pixel lies at f theta_d from the principal point). d theta_d /
+    d theta = 1 + 3 k1 u + 5 k2 u^2 + 7 k3 u^3 + 9 k4 u^4 with u = theta^2:
+    power 2, slope 1 at the centre. The products 3 k1 ... 9 k4 are each
+    rounded once (relative error at most 2^-53); ``distortion`` holds the k
+    themselves, exactly.
+    """
+    ks = np.broadcast_arrays(*(np.asarray(k, np.float64) for k in (k1, k2, k3, k4)))
+    zero = np.zeros_like(ks[0])
+    one = np.ones_like(ks[0])
+    k1, k2, k3, k4 = ks
+    distortion = np.stack((k4, zero, k3, zero, k2, zero, k1, zero, one, zero), axis=-1)
+    with np.errstate(over="ignore"):
+        coefficients = np.stack((3 * k1, 5 * k2, 7 * k3, 9 * k4), axis=-1)
+    return Polynomial(coefficients, power=2, slope_at_centre=one, distortion=distortion)
 
 
 def _two_sum(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
