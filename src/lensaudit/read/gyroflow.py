@@ -239,15 +239,23 @@ def _clean(value: dict, text: str, name: str) -> Profile | None:
         or not (0 < w <= MAX_DIMENSION and 0 < h <= MAX_DIMENSION)
     ):
         return None
+    rest = _clean_rest(value, fisheye)
+    if rest is None:
+        return None
+    line = _key_line(text, "distortion_coeffs", text.find('"fisheye_params"')) or 1
+    return tuple.__new__(Profile, (name, line, *rest[:5], w, h, fx, fy, cx, cy, k1, k2, k3, k4,
+                                   *rest[5:], STATUS_OK, ""))  # fmt: skip
+
+
+def _clean_rest(value: dict, fisheye: dict) -> tuple | None:
+    """The names, flags, stretches, RMS error and limit of a profile, in the
+    order of :class:`Profile`, where each is as the data has them (see
+    :func:`_clean`); None otherwise."""
     get = value.get
     texts = [get(key) for _, key in TEXT_FIELDS]
     official, asymmetrical = get("official"), get("asymmetrical")
-    measures = [
-        get("input_horizontal_stretch"),
-        get("input_vertical_stretch"),
-        fisheye.get("RMS_error"),
-        fisheye.get("radial_distortion_limit"),
-    ]
+    measures = [get("input_horizontal_stretch"), get("input_vertical_stretch"),
+                fisheye.get("RMS_error"), fisheye.get("radial_distortion_limit")]  # fmt: skip
     if (
         not set(map(type, texts)) <= _TEXT
         or not {type(official), type(asymmetrical)} <= _FLAG
@@ -269,38 +277,11 @@ def _clean(value: dict, text: str, name: str) -> Profile | None:
         or get("use_opencv_fisheye") is False
     ):
         return None
-    brand, model, lens, setting, profile_name, digital = (text_value or "" for text_value in texts)
-    return tuple.__new__(
-        Profile,
-        (
-            name,
-            _key_line(text, "distortion_coeffs", text.find('"fisheye_params"')) or 1,
-            brand,
-            model,
-            lens,
-            setting,
-            profile_name,
-            w,
-            h,
-            fx,
-            fy,
-            cx,
-            cy,
-            k1,
-            k2,
-            k3,
-            k4,
-            official is True,
-            digital,
-            asymmetrical is True,
-            1.0 if horizontal is None else horizontal,
-            1.0 if vertical is None else vertical,
-            NAN if rms is None else rms,
-            NAN if limit is None else limit,
-            STATUS_OK,
-            "",
-        ),
-    )
+    brand, model, lens, setting, profile_name, digital = (text or "" for text in texts)
+    return (brand, model, lens, setting, profile_name, official is True, digital,
+            asymmetrical is True, 1.0 if horizontal is None else horizontal,
+            1.0 if vertical is None else vertical, NAN if rms is None else rms,
+            NAN if limit is None else limit)  # fmt: skip
 
 
 def _key_line(text: str, key: str, start: int = 0) -> int:
@@ -361,6 +342,10 @@ def _parsed(data: bytes, name: str) -> Profile | tuple[str, object, bool]:
         except _Constant:
             return text, json.loads(text), True
     except json.JSONDecodeError as error:
+        if "\x00" in text:  # UTF-16 or UTF-32 without a byte-order mark
+            line = text.count("\n", 0, text.index("\x00")) + 1
+            message = "not valid JSON: a NUL byte (UTF-16 or UTF-32?); JSON is UTF-8"
+            return refused(name, STATUS_JSON_ERROR, line, message)
         message = f"not valid JSON: {error.msg} (column {error.colno})"
         return refused(name, STATUS_JSON_ERROR, error.lineno, message)
     except RecursionError:
