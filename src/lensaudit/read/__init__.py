@@ -10,6 +10,10 @@ context (:mod:`~lensaudit.read.tables`). With a cache
 is not parsed again. :func:`read_bytes` reads one file's content from
 anywhere (a git revision, a test).
 
+Gyroflow's lens profiles (JSON) are read by :func:`read_gyroflow` into
+:class:`~lensaudit.read.gyroflow.Profile` records; :func:`database_format`
+tells which of the two a path is.
+
 Nothing else in lensaudit touches XML.
 """
 
@@ -19,9 +23,19 @@ from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
-from . import parallel, paths, xml
+from . import gyroflow, parallel, paths, xml
 from .cache import Cache, content_digest
-from .paths import DatabaseSource, Paths, display_path, expand, resolve
+from .gyroflow import Profile
+from .paths import (
+    GYROFLOW,
+    LENSFUN,
+    DatabaseSource,
+    Paths,
+    database_format,
+    display_path,
+    expand,
+    resolve,
+)
 from .records import (
     NOT_JUDGED,
     STATUS_OK,
@@ -35,7 +49,9 @@ from .tables import KINDS, READ, SPECS, TCA, VIGNETTING, FileReader, distortion_
 from .xml import Pieces
 
 __all__ = [
+    "GYROFLOW",
     "KINDS",
+    "LENSFUN",
     "TCA",
     "VIGNETTING",
     "Cache",
@@ -45,13 +61,16 @@ __all__ = [
     "FileTables",
     "LoadError",
     "Pieces",
+    "Profile",
     "SourceFile",
+    "database_format",
     "display_path",
     "read",
     "read_bytes",
     "read_contents",
     "read_pieces",
     "read_files",
+    "read_gyroflow",
     "resolve",
 ]
 
@@ -104,6 +123,28 @@ def read(
     """
     source = resolve(paths_given)
     return Database(source, read_files(expand(source.paths), cache, calibrations, refusals))
+
+
+def read_gyroflow(paths_given: Paths) -> list[Profile]:
+    """Every Gyroflow lens profile of directories and files, in name order, as
+    :class:`~lensaudit.read.gyroflow.Profile` records (see
+    :func:`~lensaudit.read.paths.gyroflow_files` for which files): one per
+    file, whatever its content; a file that cannot be read is one of status
+    ``unreadable``. Raises :class:`LoadError` when the paths cannot be read
+    at all or are not Gyroflow lens profiles."""
+    found = []
+    for path, name in paths.gyroflow_files(paths_given):
+        try:
+            data = paths.read_file(path, gyroflow.MAX_PROFILE_BYTES)
+        except OSError as error:
+            found.append(
+                gyroflow.refused(
+                    name, STATUS_UNREADABLE, 0, f"cannot read file: {paths.reason(error)}"
+                )
+            )
+            continue
+        found.append(gyroflow.read_profile(data, name))
+    return found
 
 
 def read_files(

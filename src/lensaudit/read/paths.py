@@ -313,10 +313,13 @@ def expand(paths: Paths) -> list[tuple[Path, str]]:
     directly keep the path as given. Paths are resolved where they can be: a
     link that leads nowhere keeps its own path, to be reported when it is
     read. Raises :class:`LoadError` when a path does not exist, is empty or
-    a directory holds no XML.
+    a directory holds no XML, and for Gyroflow lens profiles
+    (:func:`database_format`), which :func:`gyroflow_files` lists instead.
     """
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
+    if paths and database_format(paths) == GYROFLOW:
+        raise LoadError(_not_lensfun(paths))
     targets: list[tuple[Path, str]] = []
     seen: set[str] = set()
     for given in map(_path, paths or ()):
@@ -377,6 +380,214 @@ def _real(path: Path) -> str:
         return os.path.abspath(path)
 
 
+# ---------------------------------------------------------------------------
+# Which format a path is: Lensfun's XML or Gyroflow's JSON lens profiles
+# ---------------------------------------------------------------------------
+
+#: A Lensfun database (XML): what every command reads.
+LENSFUN = "lensfun"
+#: Gyroflow lens profiles (JSON, :mod:`lensaudit.read.gyroflow`).
+GYROFLOW = "gyroflow"
+#: How many of a directory's JSON files are looked at, in name order, for a
+#: profile before it is said to hold none.
+PROFILES_LOOKED_AT = 16
+
+
+def database_format(paths: Paths) -> str:
+    """:data:`LENSFUN` or :data:`GYROFLOW`: which database the paths are.
+
+    A directory is a Lensfun database where liblensfun reads files there (or
+    it is a Lensfun checkout), as every command has it; else Gyroflow lens
+    profiles where one of its JSON files (:func:`gyroflow_entries`) is a
+    profile by content. A file given is Gyroflow's where it is a profile by
+    content or named ``*.json`` and not XML, else Lensfun's (read as XML,
+    whatever its name, as before). None is the default Lensfun database.
+    Raises :class:`LoadError` for a directory that is neither and for both
+    formats given together; a path that does not exist counts as Lensfun's
+    (reading it says so).
+    """
+    if paths is None:
+        return LENSFUN
+    if isinstance(paths, (str, bytes, os.PathLike)):
+        paths = [paths]
+    found: dict[str, Path] = {}
+    for given in map(_path, paths):
+        found.setdefault(format_of(given)[0], given)
+    if not found:
+        raise LoadError("no path given (None reads the default database)")
+    if len(found) > 1:
+        raise LoadError(
+            f"{display_path(found[LENSFUN])} is a Lensfun database and "
+            f"{display_path(found[GYROFLOW])} Gyroflow lens profiles: "
+            "give one kind of database at a time"
+        )
+    return next(iter(found))
+
+
+def format_of(given: Path) -> tuple[str, list[tuple[str, bool]]]:
+    """(format, JSON entries) of one path: the format as :func:`database_format`
+    says it, and for a directory of Gyroflow lens profiles its
+    :func:`gyroflow_entries` (else []). Raises :class:`LoadError` for a
+    directory that holds neither Lensfun's files nor a Gyroflow profile."""
+    try:
+        mode = os.stat(given).st_mode
+    except (OSError, ValueError):
+        return LENSFUN, []  # reading it says what is wrong
+    if not stat.S_ISDIR(mode):
+        return (_file_format(given) if stat.S_ISREG(mode) else LENSFUN), []
+    try:
+        if database_entries(given) or is_database_directory(given / CHECKOUT_DATABASE):
+            return LENSFUN, []
+        entries = gyroflow_entries(given)
+    except OSError:
+        return LENSFUN, []  # listing it says what is wrong
+    if _profile_among(given, entries):
+        return GYROFLOW, entries
+    hint = _no_files_hint(given)
+    if entries:
+        hint = (
+            "(and its *.json files are not Gyroflow lens profiles: give a Lensfun database "
+            "directory, a Lensfun checkout, XML files or Gyroflow lens profiles)"
+        )
+    raise LoadError(f"{display_path(given)}: directory holds no *.xml files {hint}")
+
+
+def _file_format(path: Path) -> str:
+    """The format of a file given directly: Gyroflow's where it is a profile
+    by content, or named ``*.json`` and not XML; Lensfun's otherwise."""
+    from .gyroflow import MAX_PROFILE_BYTES, is_profile
+
+    try:
+        with open(read_descriptor(path), "rb") as stream:
+            head = stream.read(MAX_PROFILE_BYTES + 1)
+    except OSError:
+        return LENSFUN  # reading it says why it cannot be read
+    if head.lstrip(b"\xef\xbb\xbf \t\r\n")[:1] == b"<":
+        return LENSFUN
+    if path.name.lower().endswith(".json") or is_profile(head):
+        return GYROFLOW
+    return LENSFUN
+
+
+def _profile_among(directory: Path, entries: list[tuple[str, bool]]) -> bool:
+    """Whether one of the first JSON files of a directory is a Gyroflow lens profile."""
+    from .gyroflow import MAX_PROFILE_BYTES, is_profile
+
+    for name, _ in entries[:PROFILES_LOOKED_AT]:
+        try:
+            if is_profile(read_file(directory / name, MAX_PROFILE_BYTES)):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def _not_lensfun(paths: Sequence[str | bytes | os.PathLike[str]]) -> str:
+    """Why Gyroflow lens profiles are refused where a Lensfun database is read,
+    saying how many profile files there are."""
+    shown = ", ".join(display_path(_path(given)) for given in paths)
+    files = len(gyroflow_files(paths))
+    return (
+        f"{shown}: Gyroflow lens profiles ({files} file{'s' if files != 1 else ''}); "
+        "lensaudit's commands read Lensfun databases "
+        "(lensaudit.read.read_gyroflow reads Gyroflow profiles)"
+    )
+
+
+def gyroflow_name(name: str) -> bool:
+    """Whether a file so named in a directory of Gyroflow lens profiles is read:
+    ``*.json`` in any case (Gyroflow's repository names every profile so).
+    Hidden names (``.github``, ``.git``) are never read: they are the
+    repository's, not profiles."""
+    return name.lower().endswith(".json") and not name.startswith(".")
+
+
+def gyroflow_entries(directory: str | os.PathLike[str]) -> list[tuple[str, bool]]:
+    """(name relative to ``directory``, whether a link leads to it) of every
+    file read from a directory of Gyroflow lens profiles, in name order: each
+    :func:`gyroflow_name` in it and in its subdirectories at any depth (the
+    repository keeps profiles by brand, phones by maker under ``Mobile
+    phones``), links followed, but not back to a directory being listed.
+    Anything so named but a directory is listed, and so is a subdirectory
+    that cannot be listed, so that reading it says why. Raises ``OSError``
+    when ``directory`` itself cannot be listed."""
+    root = os.fspath(directory)
+    found: list[tuple[str, bool]] = []
+    stack: list[tuple[str, str, bool, frozenset[str]]] = [
+        ("", root, False, frozenset({os.path.realpath(root)}))
+    ]
+    while stack:
+        name, path, link, above = stack.pop()
+        prefix = f"{name}/" if name else ""
+        try:
+            with os.scandir(path) as listing:
+                children = [item for item in listing if not item.name.startswith(".")]
+        except OSError:
+            if path is root:
+                raise
+            found.append((name, link))
+            continue
+        for item in children:
+            try:
+                is_directory = item.is_dir()
+            except OSError:  # a link loop: is_dir() gives up, stat() would raise
+                is_directory = False
+            if not is_directory:
+                if gyroflow_name(item.name):
+                    found.append((prefix + item.name, link or item.is_symlink()))
+                continue
+            real = os.path.realpath(item.path)
+            if real not in above:
+                stack.append(
+                    (prefix + item.name, item.path, link or item.is_symlink(), above | {real})
+                )
+    found.sort()
+    return found
+
+
+def gyroflow_files(paths: Paths) -> list[tuple[str, str]]:
+    """(real path, display name) of every Gyroflow lens profile file the
+    paths designate: each directory's :func:`gyroflow_entries`, named
+    relative to it, and files given directly, named as given; a file named
+    twice is read once. Paths are strings: a tree holds some ten thousand
+    profiles, and a Path each costs more than reading them. Raises
+    :class:`LoadError` for a path that does not exist, a Lensfun database, a
+    directory without profiles, and no paths."""
+    if isinstance(paths, (str, bytes, os.PathLike)):
+        paths = [paths]
+    if not paths:
+        raise LoadError("no path given: give a directory of Gyroflow lens profiles or profiles")
+    targets: list[tuple[str, str]] = []
+    seen: set[str] = set()
+    for given in map(_path, paths):
+        shown = display_path(given)
+        if not os.path.lexists(given):
+            raise LoadError(f"{shown}: no such file or directory")
+        kind, entries = format_of(given)
+        if kind != GYROFLOW and os.path.isdir(given):
+            raise LoadError(f"{shown}: a Lensfun database, not Gyroflow lens profiles")
+        if kind != GYROFLOW and os.path.isfile(given):
+            raise LoadError(f"{shown}: XML or not JSON, not a Gyroflow lens profile")
+        base = os.path.realpath(given)
+        # Joined by hand: os.path.join costs as much as reading a profile's bytes.
+        found = (
+            [(base, display_path(given))]
+            if not entries
+            else [
+                (
+                    _real(given / name) if link else f"{base}{os.sep}{name}",
+                    name if name.isascii() else display_path(name),
+                )
+                for name, link in entries
+            ]
+        )
+        for real, name in found:
+            if real not in seen:
+                seen.add(real)
+                targets.append((real, name))
+    return targets
+
+
 def read_descriptor(path: str | os.PathLike[str]) -> int:
     """A descriptor of ``path`` opened for reading without ever blocking (a FIFO
     cannot hang the run); the caller closes it."""
@@ -384,18 +595,30 @@ def read_descriptor(path: str | os.PathLike[str]) -> int:
     return os.open(path, flags | getattr(os, "O_CLOEXEC", 0))
 
 
-def read_file(path: str | os.PathLike[str]) -> bytes:
+def read_file(path: str | os.PathLike[str], limit: int = MAX_FILE_BYTES) -> bytes:
     """The bytes of a regular file.
 
     Raises ``OSError`` for a FIFO, device, socket or directory (opened
     non-blocking and refused), a link that leads nowhere or in a loop, and a
-    file larger than :data:`MAX_FILE_BYTES`.
+    file larger than ``limit`` (:data:`MAX_FILE_BYTES`).
     """
     descriptor = read_descriptor(path)
-    with open(descriptor, "rb", closefd=True) as stream:
+    try:
         info = os.fstat(descriptor)
         if not stat.S_ISREG(info.st_mode):
             raise OSError(0, "not a regular file")
-        if info.st_size > MAX_FILE_BYTES:
-            raise OSError(0, f"larger than {MAX_FILE_BYTES >> 20} MiB, not a database file")
-        return stream.read()
+        if info.st_size > limit:
+            raise OSError(0, f"larger than {_size(limit)}, not a database file")
+        # os.read, not a file object, which costs as much as the reading of a
+        # small file; on to the end, for a file that grows or tells no size (/proc).
+        chunks = [os.read(descriptor, info.st_size + 1)]
+        while chunks[-1]:
+            chunks.append(os.read(descriptor, max(info.st_size, 1 << 16)))
+        return chunks[0] if len(chunks) == 2 else b"".join(chunks)
+    finally:
+        os.close(descriptor)
+
+
+def _size(limit: int) -> str:
+    """A size limit in words: MiB, else KiB."""
+    return f"{limit >> 20} MiB" if limit >= 1 << 20 else f"{limit >> 10} KiB"

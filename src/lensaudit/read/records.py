@@ -33,6 +33,8 @@ STATUS_MISSING_ATTRIBUTE = "missing_attribute"
 STATUS_BAD_VALUE = "bad_value"
 STATUS_NO_LENS = "no_lens"
 STATUS_XML_ERROR = "xml_error"
+#: A file that is not JSON (Gyroflow lens profiles), as ``xml_error`` is for XML.
+STATUS_JSON_ERROR = "json_error"
 STATUS_UNREADABLE = "unreadable"
 STATUS_NOT_DATABASE = "not_database"
 
