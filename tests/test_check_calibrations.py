@@ -155,10 +155,10 @@ def test_calibration_element_that_cannot_be_audited_is_an_error_naming_it(tmp_pa
     assert f"<{tag}>" in result.findings[0].message
 
 
-def test_calibration_element_outside_a_lens_is_a_no_lens_error(tmp_path):
+def test_calibration_element_outside_a_lens_is_a_no_lens_error_where_liblensfun_stops(tmp_path):
     text = '<lensdatabase version="2">\n  ' + ZERO + "\n</lensdatabase>\n"
     result = check(database(tmp_path, "db", text))
-    assert found(result) == [("error", "no-lens", 2)]
+    assert found(result) == [("error", "no-lens", 2), ("error", "liblensfun-refuses", 2)]
 
 
 def test_broken_file_gives_its_xml_error_and_no_calibration_finding(tmp_path):

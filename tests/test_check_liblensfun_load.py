@@ -30,7 +30,11 @@ with that screen off, every element is walked, to the same verdict.
 
 from __future__ import annotations
 
+import functools
 import os
+import shutil
+import subprocess
+import tempfile
 from pathlib import Path
 from unittest import mock
 
@@ -40,11 +44,23 @@ from hypothesis import strategies as st
 
 import liblensfun_load
 import liblensfun_master
+from conftest import HISTORY_BUNDLE
 from lensaudit import read
 from lensaudit.check import LIBLENSFUN_REFUSES, analyse, sources_from_paths
 from lensaudit.read import liblensfun, tables
 
-MASTER_DB = Path("/tmp/lensfun-db/data/db")
+
+@functools.cache
+def master_db() -> Path | None:
+    """data/db of Lensfun master (the last commit of the history bundle), cloned
+    once; None without the bundle or git (the bundled database is judged alone)."""
+    if not HISTORY_BUNDLE.is_file() or shutil.which("git") is None:
+        return None
+    clone = Path(tempfile.mkdtemp(prefix="lensaudit-master-")) / "lensfun"
+    subprocess.run(
+        ["git", "clone", "--quiet", str(HISTORY_BUNDLE), str(clone)], check=True, timeout=600
+    )
+    return clone / "data" / "db"
 
 
 def bundled_db() -> Path:
@@ -54,8 +70,8 @@ def bundled_db() -> Path:
 
 def real_files() -> list[Path]:
     files = sorted(bundled_db().glob("*.xml"))
-    if MASTER_DB.is_dir():
-        files += sorted(MASTER_DB.glob("*.xml"))
+    if master_db() is not None:
+        files += sorted(master_db().glob("*.xml"))
     return files
 
 
@@ -86,8 +102,8 @@ def test_every_real_file_loads_where_liblensfun_loads_it():
 
 def test_check_reports_each_refused_real_file_once_at_liblensfun_line():
     liblensfun_master.library()
-    for directory in (bundled_db(), MASTER_DB):
-        if not directory.is_dir():
+    for directory in (bundled_db(), master_db()):
+        if directory is None:
             continue
         _, findings = analyse(sources_from_paths([directory]))
         found = {
@@ -106,8 +122,8 @@ def test_check_reports_each_refused_real_file_once_at_liblensfun_line():
 def small_real_files() -> list[bytes]:
     """A handful of small real files, of master and of the bundled database."""
     chosen = []
-    for directory in (MASTER_DB, bundled_db()):
-        if directory.is_dir():
+    for directory in (master_db(), bundled_db()):
+        if directory is not None:
             files = sorted(directory.glob("*.xml"), key=lambda p: p.stat().st_size)
             chosen += [p.read_bytes() for p in files[:4]]
     return chosen
