@@ -182,7 +182,9 @@ def clip(text: str, limit: int = MESSAGE_LIMIT) -> str:
 
     Quoted values are shortened first, so that the words after a huge value
     (``'999...' overflows a double``) survive. A command to paste that ends
-    the message (after :data:`COMMAND_MARK`) is kept whole.
+    the message (after :data:`COMMAND_MARK`) is kept whole, beyond the limit:
+    it names a file, and the words before it must not depend on how long
+    that file's path is.
     """
     head, mark, command = text.rpartition(COMMAND_MARK)
     if not mark:
@@ -193,8 +195,7 @@ def clip(text: str, limit: int = MESSAGE_LIMIT) -> str:
         command = mark + command
     spaced = " ".join(head.split()) + (" " if command and head[-1:].isspace() else "")
     head = _QUOTED.sub(lambda m: f"'{m.group(1)[:QUOTED_LIMIT]}\u2026'", spaced)
-    room = max(limit - len(command), 1)
-    return (head if len(head) <= room else head[: room - 1] + "\u2026") + command
+    return (head if len(head) <= limit else head[: limit - 1] + "\u2026") + command
 
 
 def clip_key(key: tuple) -> tuple:
