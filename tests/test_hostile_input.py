@@ -21,6 +21,7 @@ from click.testing import CliRunner
 import liblensfun_load
 from conftest import lens_xml
 from lensaudit.check import MESSAGE_LIMIT, check
+from lensaudit.check.rules.fold import SUGGESTED_NAME_LIMIT
 from lensaudit.cli import main
 
 SECRET = "TOPSECRET-4c1d"
@@ -264,8 +265,14 @@ def test_huge_number_below_the_limit_gives_a_short_message(write_xml, attribute)
 def test_huge_lens_name_is_shortened_in_messages(write_xml):
     name = "N" * 1_000_000
     xml = lens_xml(FOLDING).replace("<model>Test 10mm</model>", f"<model>{name}</model>")
-    finding = only_finding(write_xml(xml))
-    assert finding.code == "fold-in-image" and len(finding.message) <= MESSAGE_LIMIT
+    path = write_xml(xml)
+    finding = only_finding(path)
+    assert finding.code == "fold-in-image"
+    # The command to paste is kept whole beyond the limit: a name cut to
+    # SUGGESTED_NAME_LIMIT characters, the focal length and the file.
+    head, mark, command = finding.message.rpartition("`lensaudit fix ")
+    assert mark and len(head) <= MESSAGE_LIMIT
+    assert len(command) <= SUGGESTED_NAME_LIMIT + len(str(path)) + 60
 
 
 def test_huge_output_of_the_cli_stays_short(write_xml):
