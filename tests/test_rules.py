@@ -141,3 +141,23 @@ def test_the_code_names_the_library_exports_are_the_registrys():
         if name.isupper() and isinstance(value, str) and re.fullmatch(r"[a-z]+(-[a-z]+)+", value)
     }
     assert named and set(named.values()) <= set(RULES)
+
+
+@pytest.mark.parametrize("code", list(RULES))
+def test_check_explain_says_when_why_and_the_real_examples(code):
+    rule = RULES[code]
+    shown = CliRunner().invoke(main, ["check", "--explain", code])
+    assert shown.exit_code == 0, shown.output
+    flat = " ".join(shown.output.split())
+    assert flat.startswith(f"{code}: {rule.severity}, about one {rule.scope}")
+    for text in (rule.summary, rule.doc, rule.fails, rule.passes):
+        # Each text word for word; a Markdown link is shown as the page it leads to.
+        for part in re.split(r"\[[^\]]*\]\([^)]*\)", text):
+            assert " ".join(part.split()) in flat
+
+
+def test_check_explain_of_an_unknown_code_is_bad_usage_naming_the_codes():
+    shown = CliRunner().invoke(main, ["check", "--explain", "fold-everywhere"])
+    assert shown.exit_code == 2
+    assert "'fold-everywhere' is no finding code" in shown.output
+    assert all(code in shown.output for code in RULES)

@@ -12,6 +12,7 @@ import click
 from ..check_formats import writer
 from ..columns import FOLD_MARGIN
 from ..commands import cycle_collector_off
+from ..formats import printable
 from ..git import GitError, GitUnavailable, top_level
 from ..read import LoadError
 from .options import (
@@ -114,6 +115,13 @@ class _CheckCommand(click.Command):
     "vignetting model that is not monotone inside it.",
 )
 @cache_option
+@click.option(
+    "--explain",
+    metavar="CODE",
+    default=None,
+    help="Say what a finding code means, why, and a real example that gets it "
+    "and one that does not; check nothing.",
+)
 def check(
     paths: tuple[Path, ...],
     baseline: str | None,
@@ -122,8 +130,12 @@ def check(
     output: Path | None,
     verbose: bool,
     cache: bool,
+    explain: str | None,
 ) -> None:
     """`lensaudit check`: see :data:`CHECK_HELP`."""
+    if explain is not None:
+        _explain(explain)
+        return
     if not margin >= 1 or math.isinf(margin):
         raise click.BadParameter(f"{margin} is not a finite number >= 1", param_hint="--margin")
     baselines = [baseline] if baseline is not None and os.path.exists(baseline) else []
@@ -135,6 +147,21 @@ def check(
             writer(output_format)(result, stream)
     if result.failed:
         raise SystemExit(EXIT_FINDINGS)
+
+
+def _explain(code: str) -> None:
+    """Print what the finding ``code`` means, or fail as bad usage naming the codes."""
+    from ..check import rules  # the rules import numpy: only when asked
+
+    try:
+        text = rules.explain(code.strip())
+    except KeyError:
+        raise click.BadParameter(
+            f"{code!r} is no finding code; the codes: {', '.join(rules.rules())}",
+            param_hint="--explain",
+        ) from None
+    for line in text.splitlines():  # the records are lensaudit's; escaped all the same
+        click.echo(printable(line))
 
 
 def _run(

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -181,6 +182,42 @@ def codes_help(width: int = 79) -> str:
     return "\n\n".join(blocks) + "\n"
 
 
+#: A link of docs/ci.md's table: [text](target.md#anchor) or [text](#anchor).
+_LINK = re.compile(r"\[[^\]]*\]\(([\w.-]*\.md)?(#[\w-]*)?\)")
+
+
+def _terminal_links(text: str) -> str:
+    """``text`` with its Markdown links as the page they lead to (docs/ci.md for a
+    section of its own)."""
+    return _LINK.sub(lambda m: f"docs/{m.group(1) or 'ci.md'}", text)
+
+
+def explain(code: str) -> str:
+    """What a finding code means, as ``lensaudit check --explain CODE`` prints
+    it: its severity and scope, when it is reported, why, and its real
+    failing and passing examples. Raises KeyError for an unknown code."""
+    import textwrap
+
+    rule = rules()[code]
+    lines = [f"{rule.code}: {rule.severity}, about one {rule.scope}"]
+    if rule.lesser:
+        lines.append(f"  (a {rule.lesser_severity} {rule.lesser})")
+    if rule.verbose:
+        lines.append("  (reported only with --verbose)")
+    for title, text in (
+        ("When", rule.summary),
+        ("Why", rule.doc),
+        ("Fails", rule.fails),
+        ("Passes", rule.passes),
+    ):
+        wrapped = textwrap.wrap(
+            _terminal_links(text), 76, initial_indent="  ", subsequent_indent="  ",
+            break_on_hyphens=False, break_long_words=False,
+        )  # fmt: skip
+        lines += ["", f"{title}:", *wrapped]
+    return "\n".join(lines) + "\n"
+
+
 __all__ = [
     "ERROR",
     "NOTICE",
@@ -190,6 +227,7 @@ __all__ = [
     "Context",
     "Rule",
     "codes_help",
+    "explain",
     "families",
     "rules",
     "run",

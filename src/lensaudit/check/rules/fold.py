@@ -35,8 +35,8 @@ FOLD_IN_IMAGE = Rule(
     "undistorting the image mirrors pixels into its corners. The message ends with the "
     "`lensaudit fix` command that refits the entry.",
     fails=(
-        "Lensfun's slr-tokina.xml:17, Tokina 11-16mm f/2.8 AT-X 116 AF Pro DX, crop 1, ptlens "
-        "at 11 mm: D(r_max) = 1.687 at r_max = 2.194, 0.936 of the corner 1.803"
+        "slr-tokina.xml:17 of lensfunpy 1.18.0's database, Tokina 11-16mm f/2.8 AT-X 116 AF Pro "
+        "DX, crop 1, ptlens at 11 mm: D(r_max) = 1.687 at r_max = 2.194, 0.936 of the corner 1.803"
     ),
     passes=(
         "the same lens at 12 mm (slr-tokina.xml:18): D(r_max) 1.247 times the corner; at 14 mm "
