@@ -26,12 +26,8 @@ from .read import read
 from .read.paths import DatabaseSource
 from .read.records import (
     NAN,
-    STATUS_BAD_VALUE,
-    STATUS_MISSING_ATTRIBUTE,
-    STATUS_NO_LENS,
     STATUS_NOT_DATABASE,
     STATUS_OK,
-    STATUS_UNKNOWN_MODEL,
     STATUS_UNREADABLE,
     STATUS_XML_ERROR,
     SourceFile,
@@ -414,14 +410,6 @@ SEVERITIES = (SEVERITY_ERROR, SEVERITY_WARNING, SEVERITY_NOTICE)
 
 #: Statuses about a whole file: reported once per file by the distortion audit.
 FILE_STATUSES = frozenset({STATUS_XML_ERROR, STATUS_NOT_DATABASE, STATUS_UNREADABLE})
-#: Finding codes of entries that could not be audited (as lensaudit check names them).
-STATUS_CODES = {
-    STATUS_MISSING_ATTRIBUTE: "missing-attribute",
-    STATUS_BAD_VALUE: "bad-value",
-    STATUS_UNKNOWN_MODEL: "unknown-model",
-    STATUS_NO_LENS: "no-lens",
-}
-
 #: One finding: (severity, code, file, line, message).
 Finding = tuple[str, str, str, int, str]
 
@@ -660,60 +648,3 @@ class CalibrationAudit:
 
         json.dump(self.document(), stream, indent=1, allow_nan=False)
         stream.write("\n")
-
-
-def findings_of(
-    records: Iterable[dict[str, Any]],
-    element: str,
-    finding: Callable[[dict[str, Any]], tuple[str, str, str] | None],
-) -> list[Finding]:
-    """The findings of the records of one kind, by file and line: an error for
-    each that could not be audited (see :func:`status_findings`), and for each
-    audited one, what ``finding`` says of it, (severity, code, text) or None,
-    its text led by the entry's name."""
-    records = list(records)
-    found = status_findings(records, element)
-    for record in records:
-        if record["status"] != STATUS_OK:
-            continue
-        result = finding(record)
-        if result is not None:
-            severity, code, text = result
-            name = describe(record, element)
-            found.append((severity, code, record["file"], record["line"], f"{name}: {text}"))
-    found.sort(key=lambda f: (f[2], f[3]))
-    return found
-
-
-def status_findings(records: Iterable[dict[str, Any]], element: str) -> list[Finding]:
-    """Errors for entries that could not be audited, other than whole-file problems."""
-    found = []
-    for record in records:
-        status = record["status"]
-        if status in STATUS_CODES:
-            found.append(
-                (
-                    SEVERITY_ERROR,
-                    STATUS_CODES[status],
-                    record["file"],
-                    record["line"],
-                    f"{describe(record, element)}: {record['message']}",
-                )
-            )
-    return found
-
-
-def describe(record: dict[str, Any], element: str) -> str:
-    """Short name of an entry: lens and the calibration point, as far as known."""
-    name = " ".join(part for part in (record.get("maker"), record.get("lens")) if part)
-    lens = record.get("lens") or ""
-    maker = record.get("maker") or ""
-    if maker and lens.lower().startswith(maker.lower()):
-        name = lens
-    details = []
-    for key, unit in (("focal", " mm"), ("aperture", ""), ("distance", " m")):
-        value = record.get(key)
-        if isinstance(value, float) and value == value:
-            details.append(f"f/{value:g}" if key == "aperture" else f"{value:g}{unit}")
-    where = f"<{element}>" + (f" at {', '.join(details)}" if details else "")
-    return f"{name or 'unnamed lens'} {where}"

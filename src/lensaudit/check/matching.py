@@ -18,15 +18,15 @@ from ..read.records import STATUS_OK, DistortionEntry
 from .inputs import last_readable
 from .parsing import LensRecord, ParsedSource, parse_sources
 from .result import (
-    BASELINE_UNREADABLE,
     FILE_CODES,
-    SEVERITY_NOTICE,
     Finding,
     Identified,
     clip,
     none_if_nan,
     normalized_name,
 )
+from .rules.baseline_unreadable import BASELINE_UNREADABLE
+from .rules.file_errors import file_identified
 from .rules.liblensfun_refuses import liblensfun_refusals
 
 
@@ -81,14 +81,6 @@ def calibration_content(entry: object) -> tuple:
 def _content_fields(record_type: type) -> tuple[str, ...]:
     """The fields of a record type that :func:`calibration_content` keeps."""
     return tuple(f.name for f in fields(record_type) if f.name not in _CALIBRATION_SKIPPED)
-
-
-def file_identified(file: ParsedSource) -> Identified:
-    """A file-level finding: the file's name and the problem, without its position."""
-    problem = file.problem
-    assert problem is not None
-    identity = (problem.severity, problem.code, file.source.file_name, file.problem_text)
-    return Identified(problem, (identity,), (file.source.file_name,))
 
 
 def readable_baseline(
@@ -235,8 +227,9 @@ def baseline_notices(
         )
         for name in sorted(incomparable)
     ]
+    rule = BASELINE_UNREADABLE
     return [
-        Finding(SEVERITY_NOTICE, BASELINE_UNREADABLE, readable[name], 0, 0, clip(text))
+        Finding(rule.severity, rule.code, readable[name], 0, 0, clip(text))
         for name, text in texts
         if name in readable
     ]

@@ -12,10 +12,7 @@ from functools import cached_property
 from .. import read as reader
 from ..read.cache import content_digest
 from ..read.records import (
-    STATUS_NOT_DATABASE,
     STATUS_OK,
-    STATUS_UNREADABLE,
-    STATUS_XML_ERROR,
     DistortionEntry,
     FileTables,
     Lens,
@@ -23,19 +20,14 @@ from ..read.records import (
 )
 from ..read.tables import KINDS, TCA, VIGNETTING
 from .inputs import Source
-from .result import NOT_A_DATABASE, SEVERITY_ERROR, UNREADABLE, XML_ERROR, Finding, clip
+from .result import Finding, clip
+from .rules.file_errors import STATUS_RULES as FILE_STATUS_RULES
+from .rules.file_errors import UNREADABLE
 
 # typing only for type checkers: parsing needs no numpy (the audits do)
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from ..calibrations import CalibrationRecords
-
-#: The finding code of each file-level status of the reader.
-FILE_STATUS_CODES = {
-    STATUS_XML_ERROR: XML_ERROR,
-    STATUS_NOT_DATABASE: NOT_A_DATABASE,
-    STATUS_UNREADABLE: UNREADABLE,
-}
 
 
 @dataclass(frozen=True)
@@ -136,11 +128,11 @@ class ParsedSource:
 def file_finding(tables: FileTables, display: str) -> Finding | None:
     """The error about a whole file (not well-formed, not a database, not
     readable) from its tables, or None for a database that parsed."""
-    code = FILE_STATUS_CODES.get(tables.status)
-    if code is None:
+    rule = FILE_STATUS_RULES.get(tables.status)
+    if rule is None:
         return None
-    message = f"{display}: {tables.error}" if code == UNREADABLE else clip(tables.error)
-    return Finding(SEVERITY_ERROR, code, display, tables.line, tables.column, message)
+    message = f"{display}: {tables.error}" if rule is UNREADABLE else clip(tables.error)
+    return Finding(rule.severity, rule.code, display, tables.line, tables.column, message)
 
 
 def parse_sources(

@@ -13,9 +13,15 @@ from ...read.records import STATUS_OK
 from ..matching import calibration_content, lens_identity
 from ..result import Finding, Identified, clip, clip_key, entry_key
 from . import ERROR, NOTICE, WARNING, Context
+from .input_errors import RULES as INPUT_RULES
+from .input_errors import STATUS_RULES
 
 #: Vignetting or TCA records audited in one batch of arrays.
 RECORDS_AT_ONCE = 16384
+
+#: The rule of each status of a vignetting or TCA entry that could not be
+#: audited (a file's own problems are its file's finding).
+ENTRY_STATUS_RULES = {status: rule for status, rule in STATUS_RULES.items() if rule in INPUT_RULES}
 
 #: (severity, code, text) of an audited record, or None.
 Wording = Callable[[dict[str, Any]], "tuple[str, str, str] | None"]
@@ -46,8 +52,43 @@ def calibration_findings(
 
 def findings_of(records: Iterable[dict[str, Any]], kind: str, wording: Wording) -> list[tuple]:
     """(severity, code, file, line, message) of each of ``records`` (dicts of
-    an audit's ``records()``), see :func:`lensaudit.calibrations.findings_of`."""
-    return calibrations.findings_of(records, kind, wording)
+    an audit's ``records()``), by file and line: the input error of each that
+    could not be audited (the rules of :mod:`.input_errors`; whole-file
+    problems are their file's own finding), and for each audited one what
+    ``wording`` says of it, (severity, code, text) or None, its text led by
+    the entry's name."""
+    found = []
+    for record in records:
+        status = record["status"]
+        if status == STATUS_OK:
+            said = wording(record)
+            if said is not None:
+                severity, code, text = said
+                name = describe(record, kind)
+                found.append((severity, code, record["file"], record["line"], f"{name}: {text}"))
+        elif status in ENTRY_STATUS_RULES:
+            rule = ENTRY_STATUS_RULES[status]
+            text = f"{describe(record, kind)}: {record['message']}"
+            found.append((rule.severity, rule.code, record["file"], record["line"], text))
+    found.sort(key=lambda f: (f[2], f[3]))
+    return found
+
+
+def describe(record: dict[str, Any], element: str) -> str:
+    """Short name of a vignetting or TCA entry: its lens and calibration point,
+    as far as known."""
+    name = " ".join(part for part in (record.get("maker"), record.get("lens")) if part)
+    lens = record.get("lens") or ""
+    maker = record.get("maker") or ""
+    if maker and lens.lower().startswith(maker.lower()):
+        name = lens
+    details = []
+    for key, unit in (("focal", " mm"), ("aperture", ""), ("distance", " m")):
+        value = record.get(key)
+        if isinstance(value, float) and value == value:
+            details.append(f"f/{value:g}" if key == "aperture" else f"{value:g}{unit}")
+    where = f"<{element}>" + (f" at {', '.join(details)}" if details else "")
+    return f"{name or 'unnamed lens'} {where}"
 
 
 def _part_findings(
@@ -69,7 +110,7 @@ def _part_findings(
         if status == STATUS_OK:
             if severities[position] not in shown:
                 continue
-        elif status not in calibrations.STATUS_CODES:
+        elif status not in ENTRY_STATUS_RULES:
             continue
         entry = records[position]
         record = _record(audit, position)

@@ -6,8 +6,9 @@ further."""
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
-from ..matching import file_identified
+from ...read.records import STATUS_NOT_DATABASE, STATUS_UNREADABLE, STATUS_XML_ERROR
 from ..result import Identified
 from . import ERROR, Context, Rule
 
@@ -54,9 +55,24 @@ UNREADABLE = Rule(
 )
 RULES = (XML_ERROR, NOT_A_DATABASE, UNREADABLE)
 
+#: The rule of each file-level status of the reader.
+STATUS_RULES = {
+    STATUS_XML_ERROR: XML_ERROR,
+    STATUS_NOT_DATABASE: NOT_A_DATABASE,
+    STATUS_UNREADABLE: UNREADABLE,
+}
+
 
 def find(context: Context) -> Iterable[tuple[int, Identified]]:
     """The finding of each file of ``context`` that could not be parsed."""
     for index, file in enumerate(context.read):
         if file.problem is not None:
             yield index, file_identified(file)
+
+
+def file_identified(file: Any) -> Identified:
+    """A file-level finding: the file's name and the problem, without its position."""
+    problem = file.problem
+    assert problem is not None
+    identity = (problem.severity, problem.code, file.source.file_name, file.problem_text)
+    return Identified(problem, (identity,), (file.source.file_name,))
