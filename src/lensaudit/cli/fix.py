@@ -1,4 +1,5 @@
-"""``lensaudit fix``: refit models that fold inside their image, and patch the XML."""
+"""``lensaudit fix``: refit the models that fold inside or just outside their image, and
+patch the XML."""
 
 from __future__ import annotations
 

@@ -67,7 +67,7 @@ def scan(
 
     Every kind has file, line, the lens, the model as written, severity
     (vignetting, tca), status and message; see docs/vignetting.md. The
-    cache serves distortion only.
+    cache keeps every kind's rows (the reader's work), not the audits.
     """
     run_scan(
         ScanArguments(

@@ -37,7 +37,8 @@ FOLD_BETWEEN_CALIBRATIONS = Rule(
     "folds inside the image",
     "at a focal length between two calibrations of a zoom, neither of which folds, the model "
     "liblensfun interpolates folds back inside the image (see "
-    "[below](#zooms-between-their-calibrations))",
+    "[below](#zooms-between-their-calibrations)); a notice, with `--verbose`, where whether "
+    "it folds could not be decided",
     "liblensfun interpolates a zoom's coefficients with a spline through the calibrations "
     "either side and their neighbours; the spline can overshoot. Proven over every focal "
     "length of the interval, not sampled; a notice with --verbose where it cannot be decided.",
