@@ -121,6 +121,8 @@ def test_the_reader_and_its_cache_import_neither_the_pipeline_nor_a_heavy_module
     found = imported_modules("import lensaudit.read, lensaudit.read.cache")
     assert "lensaudit.read.cache" in found
     assert not found & {"lensaudit.pipeline", *HEAVY}
+    # Gyroflow's reader (and its json) only where a Gyroflow profile is read.
+    assert "lensaudit.read.gyroflow" not in found
 
 
 def test_the_check_reads_its_files_before_it_needs_numpy():

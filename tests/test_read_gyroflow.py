@@ -26,12 +26,11 @@ from lensaudit.read import (
     GYROFLOW,
     LENSFUN,
     LoadError,
-    Profile,
     database_format,
     gyroflow,
     read_gyroflow,
 )
-from lensaudit.read.gyroflow import is_profile, read_profile
+from lensaudit.read.gyroflow import Profile, is_profile, read_profile
 from lensaudit.read.paths import expand, gyroflow_entries, gyroflow_files
 
 TARBALL = (

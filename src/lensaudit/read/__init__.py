@@ -10,7 +10,8 @@ context (:mod:`~lensaudit.read.tables`). With a cache
 is not parsed again. :func:`read_bytes` reads one file's content from
 anywhere (a git revision, a test).
 
-Gyroflow's lens profiles (JSON) are read by :func:`read_gyroflow` into
+Gyroflow's lens profiles (JSON) are read by :func:`read_gyroflow` (which
+imports :mod:`~lensaudit.read.gyroflow` when called) into
 :class:`~lensaudit.read.gyroflow.Profile` records; :func:`database_format`
 tells which of the two a path is.
 
@@ -23,9 +24,8 @@ from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from pathlib import Path
 
-from . import gyroflow, parallel, paths, xml
+from . import parallel, paths, xml
 from .cache import Cache, content_digest
-from .gyroflow import Profile
 from .paths import (
     GYROFLOW,
     LENSFUN,
@@ -61,7 +61,6 @@ __all__ = [
     "FileTables",
     "LoadError",
     "Pieces",
-    "Profile",
     "SourceFile",
     "database_format",
     "display_path",
@@ -125,13 +124,15 @@ def read(
     return Database(source, read_files(expand(source.paths), cache, calibrations, refusals))
 
 
-def read_gyroflow(paths_given: Paths) -> list[Profile]:
+def read_gyroflow(paths_given: Paths) -> list:
     """Every Gyroflow lens profile of directories and files, in name order, as
     :class:`~lensaudit.read.gyroflow.Profile` records (see
     :func:`~lensaudit.read.paths.gyroflow_files` for which files): one per
     file, whatever its content; a file that cannot be read is one of status
     ``unreadable``. Raises :class:`LoadError` when the paths cannot be read
     at all or are not Gyroflow lens profiles."""
+    from . import gyroflow  # json: a Lensfun database never needs it
+
     found = []
     for path, name in paths.gyroflow_files(paths_given):
         try:
