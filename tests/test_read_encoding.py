@@ -31,7 +31,8 @@ from click.testing import CliRunner
 import liblensfun_load
 import liblensfun_master
 from lensaudit import read
-from lensaudit.check import ENCODING_MISMATCH, LIBLENSFUN_REFUSES, check
+from lensaudit.check import LIBLENSFUN_REFUSES, check
+from lensaudit.check.rules.encoding_mismatch import ENCODING_MISMATCH as MISMATCH
 from lensaudit.cli import main
 
 #: A lens that folds (so that check names it), whose maker is not ASCII.
@@ -117,14 +118,14 @@ def test_real_files_declared_iso_8859_1_give_the_names_liblensfun_gives(tmp_path
     assert found == expected
     assert not repr(found).isascii()  # names that a reader of ISO-8859-1 reads otherwise
     findings = check([write(tmp_path, data, name)]).findings
-    assert [f.line for f in findings if f.code == ENCODING_MISMATCH] == [1]
+    assert [f.line for f in findings if f.code == MISMATCH.code] == [1]
 
 
 @pytest.mark.parametrize("encoding", DISAGREEING)
 def test_check_says_the_declaration_disagrees_with_the_bytes(tmp_path, encoding):
     path = write(tmp_path, declared(encoding).encode("utf-8"))
     result = check([path])
-    [finding] = [f for f in result.findings if f.code == ENCODING_MISMATCH]
+    [finding] = [f for f in result.findings if f.code == MISMATCH.code]
     assert (finding.severity, finding.file, finding.line) == ("warning", str(path), 1)
     assert f"encoding='{encoding}'" in finding.message and "UTF-8" in finding.message
     if encoding in ("ISO-8859-1", "windows-1252"):
@@ -148,7 +149,7 @@ def test_check_says_the_declaration_disagrees_with_the_bytes(tmp_path, encoding)
     ids=["ascii-declared-latin-1", "utf-8-declared", "utf8-declared", "undeclared"],
 )
 def test_no_finding_where_the_declaration_reads_as_liblensfun_reads(tmp_path, data):
-    assert not [f for f in check([write(tmp_path, data)]).findings if f.code == ENCODING_MISMATCH]
+    assert not [f for f in check([write(tmp_path, data)]).findings if f.code == MISMATCH.code]
 
 
 def test_scan_check_and_report_name_the_lens_as_liblensfun_does(tmp_path):
@@ -165,7 +166,7 @@ def test_scan_check_and_report_name_the_lens_as_liblensfun_does(tmp_path):
     checked = runner.invoke(main, ["check", str(path.parent), "-f", "json", "--no-cache"])
     findings = json.loads(checked.output)["findings"]
     assert any(MAKER in f["message"] for f in findings if f["code"] == "fold-in-image")
-    assert [f["line"] for f in findings if f["code"] == ENCODING_MISMATCH] == [1]
+    assert [f["line"] for f in findings if f["code"] == MISMATCH.code] == [1]
     out = tmp_path / "report"
     reported = runner.invoke(main, ["report", str(path.parent), "-o", str(out), "--no-cache"])
     assert reported.exit_code == 0, reported.output
@@ -196,7 +197,7 @@ def test_the_cache_keeps_the_names_and_the_finding_read_as_utf8(tmp_path, monkey
     assert [e["maker"] for e in entries] == ["Zeiss", MAKER, "Zeiss"]
     checked = runner.invoke(main, ["check", *arguments])
     findings = json.loads(checked.output)["findings"]
-    assert [f["code"] for f in findings if f["code"] == ENCODING_MISMATCH] == [ENCODING_MISMATCH]
+    assert [f["code"] for f in findings if f["code"] == MISMATCH.code] == [MISMATCH.code]
     assert any(MAKER in f["message"] for f in findings)
 
 
@@ -222,7 +223,7 @@ def test_bytes_not_utf8_are_refused_where_liblensfun_refuses_them(tmp_path, decl
         assert declaration in said[0].message and "reads every file as UTF-8" in said[0].message
         assert read.read_bytes(data, "test.xml").lenses[1].maker == MAKER
         assert "1 lens before" in said[0].message and "2 lenses from there on" in said[0].message
-    assert not [f for f in findings if f.code == ENCODING_MISMATCH]
+    assert not [f for f in findings if f.code == MISMATCH.code]
 
 
 # -- UTF-16 and UTF-32 ------------------------------------------------------------
@@ -252,7 +253,7 @@ def test_a_utf16_or_utf32_file_is_refused_and_its_encoding_named(
     [refusal] = [f for f in result.findings if f.code == LIBLENSFUN_REFUSES]
     assert refusal.line == 1 and f"the file is {named}" in refusal.message
     assert "3 lenses from there on are lost" in refusal.message
-    assert not [f for f in result.findings if f.code in (ENCODING_MISMATCH, "xml-error")]
+    assert not [f for f in result.findings if f.code in (MISMATCH.code, "xml-error")]
     # What the file holds is read as its encoding spells it, and audited.
     assert [lens.maker for lens in read.read_bytes(data, "test.xml").lenses][1] == MAKER
     assert [f.code for f in result.findings].count("fold-in-image") == 3

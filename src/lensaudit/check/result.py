@@ -44,7 +44,6 @@ VIGNETTING_STARTING_VALUES = "vignetting-starting-values"
 INVERSION_FAILS_IN_IMAGE = "inversion-fails-in-image"
 FOCAL_SERIES_OUTLIER = "focal-series-outlier"
 LIBLENSFUN_REFUSES = "liblensfun-refuses"
-ENCODING_MISMATCH = "encoding-mismatch"
 
 #: Findings about a whole file.
 FILE_CODES = frozenset({XML_ERROR, NOT_A_DATABASE, UNREADABLE})
