@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import struct
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -14,6 +13,7 @@ from .constants import ABSENT as _ABSENT
 from .constants import EPS as _EPS
 from .constants import HALF_WIDTH as _HALF_WIDTH
 from .constants import MAX as _MAX
+from .constants import MAX_BITS, bits_float, float_bits
 from .constants import PLAIN_NEWTON_STEPS as _PLAIN_NEWTON_STEPS
 from .constants import SAFE_SCALED as _SAFE_SCALED
 from .constants import SMALLEST_NORMAL as _SMALLEST_NORMAL
@@ -303,7 +303,6 @@ def _polish(
 
 # -- the fast path: certificate ------------------------------------------------------
 
-_MAX_BITS = 0x7FEFFFFFFFFFFFFF  # bit pattern of _MAX
 #: Absolute allowance for underflow in evaluations scaled so that the largest
 #: term is at least 1/16: every rounding below the normal range costs < 2^-1074.
 _UNDERFLOW_SLOP = 2.0**-1060
@@ -595,7 +594,7 @@ def _certify_estimates(x: FloatArray, kind: NDArray[np.int8], frexps: _Frexps) -
     """True where the wanted root provably lies within 64 doubles either side of x > 0."""
     bits = x.view(np.int64)
     below = np.maximum(bits - 64, 1).view(np.float64)
-    above = np.minimum(bits + 64, _MAX_BITS).view(np.float64)
+    above = np.minimum(bits + 64, MAX_BITS).view(np.float64)
     proven = np.isfinite(x) & (x > 0)
     check = np.flatnonzero(proven)
     parts = tuple(v[check] for v in frexps)
@@ -667,7 +666,7 @@ def _bisect(kind: NDArray[np.int8], frexps: _Frexps) -> tuple[FloatArray, NDArra
     found = np.ones(size, dtype=bool)
     active = np.arange(size)
     lo = np.zeros(size, dtype=np.int64)  # the bits of 0.0, below the root
-    hi = np.full(size, _MAX_BITS, dtype=np.int64)  # at or above it
+    hi = np.full(size, MAX_BITS, dtype=np.int64)  # at or above it
     while active.size:
         middle = lo + (hi - lo) // 2
         parts = tuple(v[active] for v in frexps)
@@ -733,14 +732,6 @@ def _exact_at_most(P: tuple[int, int, int, int], kind: int, n: int, d: int) -> b
     return slope > 0 or bend < 0  # _FIRST_OF_THREE
 
 
-def _float_bits(x: float) -> int:
-    return struct.unpack("<q", struct.pack("<d", x))[0]
-
-
-def _bits_float(bits: int) -> float:
-    return struct.unpack("<d", struct.pack("<q", bits))[0]
-
-
 def _round_exact(root: Fraction) -> float:
     return math.inf if root > _MAX else float(root)  # int / int rounds correctly
 
@@ -766,15 +757,15 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
         return _round_exact(simple)
 
     def at_most(bits: int) -> bool:
-        n, d = _bits_float(bits).as_integer_ratio()
+        n, d = bits_float(bits).as_integer_ratio()
         return _exact_at_most(P, kind, n, d)
 
-    if not at_most(_MAX_BITS):
+    if not at_most(MAX_BITS):
         return math.inf
-    lo, hi = 0, _MAX_BITS
+    lo, hi = 0, MAX_BITS
     if math.isfinite(estimate) and estimate > 0:
         # Gallop out from the estimate until the root is bracketed.
-        start = min(_float_bits(estimate), _MAX_BITS)
+        start = min(float_bits(estimate), MAX_BITS)
         step = 1
         if at_most(start):
             hi = start
@@ -783,9 +774,9 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
             lo = max(hi - step, 0)
         else:
             lo = start
-            while lo + step < _MAX_BITS and not at_most(lo + step):
+            while lo + step < MAX_BITS and not at_most(lo + step):
                 lo, step = lo + step, step * 2
-            hi = min(lo + step, _MAX_BITS)
+            hi = min(lo + step, MAX_BITS)
     while hi - lo > 1:
         middle = (lo + hi) // 2
         if at_most(middle):
@@ -793,14 +784,14 @@ def _exact_min_positive_root(a: float, b: float, c: float, estimate: float = mat
         else:
             lo = middle
     # The root lies in (below, above]: round to the nearer, ties to even.
-    below, above = Fraction(_bits_float(lo)), Fraction(_bits_float(hi))
+    below, above = Fraction(bits_float(lo)), Fraction(bits_float(hi))
     halfway = (below + above) / 2
     if not _exact_at_most(P, kind, halfway.numerator, halfway.denominator):
-        return _bits_float(hi)
+        return bits_float(hi)
     n, d = halfway.numerator, halfway.denominator
     if ((P3 * n + P2 * d) * n + P1 * d * d) * n + P0 * d * d * d == 0:
-        return _bits_float(hi if hi % 2 == 0 else lo)
-    return _bits_float(lo)
+        return bits_float(hi if hi % 2 == 0 else lo)
+    return bits_float(lo)
 
 
 # -- the solver ------------------------------------------------------------------------

@@ -7,6 +7,7 @@ import numpy, and both must prove their answers with the same margins.
 from __future__ import annotations
 
 import math
+import struct
 
 #: Unit roundoff of binary64 (numpy.finfo(float).eps), its largest and smallest normal values.
 EPS = 2.0**-52
@@ -31,3 +32,15 @@ ABSENT = -(1 << 20)
 ROOTS_IN_RANGE = 2.0**1020
 #: Half diagonal of Lensfun's 36 x 24 mm reference sensor, in millimetres.
 HALF_DIAGONAL_MM = math.hypot(18.0, 12.0)
+#: Bit pattern of MAX: the positive doubles are the patterns 1 to MAX_BITS, in order.
+MAX_BITS = 0x7FEFFFFFFFFFFFFF
+
+
+def float_bits(x: float) -> int:
+    """The bit pattern of a double, as an integer (ordered as the positive doubles are)."""
+    return struct.unpack("<q", struct.pack("<d", x))[0]
+
+
+def bits_float(bits: int) -> float:
+    """The double of a bit pattern (:func:`float_bits` undone)."""
+    return struct.unpack("<d", struct.pack("<q", bits))[0]

@@ -53,7 +53,6 @@ root comes back finite and positive (exact path).
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Callable
 from fractions import Fraction
 
@@ -61,7 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .arrays import _two_product, _two_sum
-from .constants import ABSENT, EPS, MAX, SMALLEST_NORMAL
+from .constants import ABSENT, EPS, MAX, MAX_BITS, SMALLEST_NORMAL, bits_float, float_bits
 
 FloatArray = NDArray[np.float64]
 
@@ -78,7 +77,6 @@ _LARGEST_SCALED_ROOT = 2.0**200
 _UNDERFLOW_SLOP = 2.0**-1000
 _NEWTON_STEPS = 8
 _CHUNK = 1 << 14  # polynomials per pass: keeps numpy's temporaries in cache
-_MAX_BITS = 0x7FEFFFFFFFFFFFFF  # bit pattern of the largest double
 
 
 # -- the fast path ---------------------------------------------------------------------
@@ -372,14 +370,6 @@ def _variations(signs: list[int]) -> int:
     return sum(1 for x, y in zip(nonzero, nonzero[1:], strict=False) if x != y)
 
 
-def _float_bits(x: float) -> int:
-    return struct.unpack("<q", struct.pack("<d", x))[0]
-
-
-def _bits_float(bits: int) -> float:
-    return struct.unpack("<d", struct.pack("<q", bits))[0]
-
-
 def _at_most_test(coefficients: tuple[float, ...]) -> tuple[Callable[[Fraction], bool], _Poly]:
     """(at_most, odd): at_most(X) tells, exactly, whether p changes sign on (0, X]."""
     f = _trim([Fraction(1)] + [Fraction(c) for c in coefficients])
@@ -409,9 +399,9 @@ def exact_first_sign_change(coefficients: tuple[float, ...], estimate: float = m
         return math.inf
 
     def at_most(bits: int) -> bool:
-        return at_most_exact(Fraction(_bits_float(bits)))
+        return at_most_exact(Fraction(bits_float(bits)))
 
-    if not at_most(_MAX_BITS):
+    if not at_most(MAX_BITS):
         return math.inf
     lo, hi = _bracket(at_most, estimate)
     while hi - lo > 1:
@@ -421,19 +411,19 @@ def exact_first_sign_change(coefficients: tuple[float, ...], estimate: float = m
         else:
             lo = middle
     # The root lies in (below, above]: round to the nearer, ties to even.
-    halfway = (Fraction(_bits_float(lo)) + Fraction(_bits_float(hi))) / 2
+    halfway = (Fraction(bits_float(lo)) + Fraction(bits_float(hi))) / 2
     if not at_most_exact(halfway):
-        return _bits_float(hi)
+        return bits_float(hi)
     if _sign_at(_integers(odd), halfway.numerator, halfway.denominator) == 0:
-        return _bits_float(hi if hi % 2 == 0 else lo)
-    return _bits_float(lo)
+        return bits_float(hi if hi % 2 == 0 else lo)
+    return bits_float(lo)
 
 
 def _bracket(at_most: Callable[[int], bool], estimate: float) -> tuple[int, int]:
     """Bit patterns lo < hi with not at_most(lo) and at_most(hi), galloping out from estimate."""
     if not (math.isfinite(estimate) and estimate > 0):
-        return 0, _MAX_BITS
-    start = min(_float_bits(estimate), _MAX_BITS)
+        return 0, MAX_BITS
+    start = min(float_bits(estimate), MAX_BITS)
     step = 1
     if at_most(start):
         hi = start
@@ -441,9 +431,9 @@ def _bracket(at_most: Callable[[int], bool], estimate: float) -> tuple[int, int]
             hi, step = hi - step, step * 2
         return max(hi - step, 0), hi
     lo = start
-    while lo + step < _MAX_BITS and not at_most(lo + step):
+    while lo + step < MAX_BITS and not at_most(lo + step):
         lo, step = lo + step, step * 2
-    return lo, min(lo + step, _MAX_BITS)
+    return lo, min(lo + step, MAX_BITS)
 
 
 # -- the solver ----------------------------------------------------------------------------
